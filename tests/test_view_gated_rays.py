@@ -2,7 +2,8 @@
 from the candidate the stored gating chose, as its detections and tracks are (walk38): it
 drew them from the best-scored candidate, and a static orange object every camera sees,
 best-scored in most frames, drew 370 of a webcam's 599 rays and their epipolar lines to the
-object while the ball's track flew beside them. Through the real CLI on sessions ``pslog
+object while the ball's track flew beside them; and a session shown alone (type A fused on
+the fly, gated) drew the best-scored candidate as the detection, the ball grey. Through the real CLI on sessions ``pslog
 simulate`` writes; the .rrd read back."""
 
 from __future__ import annotations
@@ -68,6 +69,24 @@ def test_rays_and_epipolar_lines_follow_the_gates_choice_not_the_best_score(tmp_
         lines = batch_column(chunks[f"/world/cameras/{other}/image/epipolar/{cam.name}"],
                              "LineStrips2D:strips")
         assert sum(len(s or []) for s in lines) <= len(chosen)
+    # the session alone (type A fused on the fly): the same gating, its rejections drawn
+    # grey and its choices' rays (the best-scored candidate's before, the ball grey)
+    alone = tmp_path / "alone.rrd"
+    done = _pslog("view", session, "--frames", "none", "--save", alone)
+    assert done.returncode == 0, done.stderr
+    assert "fused on the fly: typeA" in done.stdout
+    again = temporal_chunks(alone)
+    for cam in rig.cameras:
+        for entity, column in ((f"/world/rays/{cam.name}", "LineStrips3D:strips"),
+                               (f"/world/cameras/{cam.name}/image/detections",
+                                "Points2D:positions"),
+                               (f"/world/cameras/{cam.name}/image/rejected",
+                                "Points2D:positions")):
+            assert batch_column(again[entity], column) == batch_column(chunks[entity],
+                                                                       column), entity
+    grey = sum(len(p or []) for cam in rig.cameras for p in batch_column(
+        again[f"/world/cameras/{cam.name}/image/rejected"], "Points2D:positions"))
+    assert grey == len(stored.rejections["typeA"])
     # the case: the object best-scored in many frames, the gate's choice in few
     assert best_on_object > 100 and chosen_on_object < 10, (best_on_object, chosen_on_object)
     print(f"object best-scored in {best_on_object} frames, chosen in {chosen_on_object}")

@@ -11,6 +11,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from functools import cached_property
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -28,6 +29,9 @@ from pslog.fusion import (
 from pslog.log import Session, read_session
 from pslog.records import NS, Detections, Observations, Track
 from pslog.timing import observations as timed_observations
+
+if TYPE_CHECKING:
+    from pslog.fusion.gating import Rejections
 
 #: The method fused on the fly when a session has no stored track (it shows the paper's
 #: Figure 2 construction).
@@ -367,8 +371,10 @@ def load_view_data(session_paths: str | Path | Sequence[str | Path], *,
         if "typeA" in missing and len(session.rig) >= 2 and len(observations):
             # one gating and one type-A pass give the track and its Figure 2 construction
             # (what fuse_all and explain_type_a would each compute again, bit for bit)
-            tracks["typeA"], construction, construction_obs = _type_a_with_construction(
-                session)
+            # (and its gating's rejections, as a stored track has them: the images draw the
+            # ball the gate chose, not the best-scored candidate; walk38)
+            (tracks["typeA"], construction, construction_obs,
+             rejections["typeA"]) = _type_a_with_construction(session)
         rest = [m for m in missing if m != "typeA" or "typeA" not in tracks]
         if rest:
             tracks.update(fuse_all(session.detections, session.rig, rest,
@@ -464,18 +470,21 @@ def _type_a_prepared(session: Session) -> tuple[Observations, Prepared]:
 
 
 def _type_a_with_construction(session: Session
-                              ) -> tuple[Track, TypeAConstruction, Observations]:
+                              ) -> tuple[Track, TypeAConstruction, Observations, Rejections]:
     """``typeA`` fused from the session's detections as :func:`pslog.fusion.fuse_all`
     fuses it (gated, default options), its construction as
-    :func:`pslog.fusion.explain_type_a` explains it, from one gating and one pass, and the
-    observations both rest on."""
+    :func:`pslog.fusion.explain_type_a` explains it, from one gating and one pass, the
+    observations both rest on and the gating's rejections (as ``pslog fuse`` stores them)."""
     from pslog.fusion import check_tolerance
+    from pslog.fusion.gating import gate_for, prepared_for
 
     rig = session.rig
     options = for_session(FusionOptions(), session.metadata, rig)
     check_tolerance(rig, options.tolerance_s)
-    # (with the long-gap confirmation, as pslog fuse: the points it drops are not shown)
-    obs, prep = _type_a_prepared(session)
+    # (with the long-gap confirmation, as pslog fuse: the points it drops are not shown;
+    # gated as _type_a_prepared gates, its rejections kept)
+    gated = gate_for(session.detections, rig, "typeA", FusionOptions())
+    obs, prep = gated.observations, prepared_for(gated, rig)
     track, construction = type_a_explained(prep, rig, options)
     if options.clock_covariance is not None and len(track):
         # (as pslog fuse: the synced clocks' uncertainty in the covariance; points unchanged)
@@ -484,4 +493,4 @@ def _type_a_with_construction(session: Session
 
         track = with_clock_covariance(track, "typeA", prep, rig, replace(
             options, max_gap_s=options.max_gap_s or default_max_gap_s(rig)))
-    return track, construction, obs
+    return track, construction, obs, gated.rejections
