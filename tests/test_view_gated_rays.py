@@ -3,8 +3,8 @@ from the candidate the stored gating chose, as its detections and tracks are (wa
 drew them from the best-scored candidate, and a static orange object every camera sees,
 best-scored in most frames, drew 370 of a webcam's 599 rays and their epipolar lines to the
 object while the ball's track flew beside them; and a session shown alone (type A fused on
-the fly, gated) drew the best-scored candidate as the detection, the ball grey. Through the real CLI on sessions ``pslog
-simulate`` writes; the .rrd read back."""
+the fly, gated) drew the best-scored candidate as the detection, the ball grey. Through
+the real CLI on sessions ``pslog simulate`` writes; the .rrd read back."""
 
 from __future__ import annotations
 
