@@ -178,10 +178,11 @@ def _legend(estimated, auto: bool = False, rig=None) -> str:
     (:func:`_differing_rates`); where it has not, the legend says why."""
     kept = [name for name in ("offset", "drift", "readout") if name not in estimated]
     columns = ("offset, drift: each camera's clock against the first camera's (ref), which "
-               "defines the session clock; readout: rolling shutter, top row to bottom row; "
-               "rig: the shutter offset the rig plans, relative to the first camera's; phase: "
-               "each shutter's phase after sync, relative to the first camera's (near rig when "
-               "the shutters keep the plan)")
+               "defines the session clock; σ: its standard deviation; readout: rolling "
+               "shutter, top row to bottom row; resid: the RMS reprojection residual of the "
+               "camera's inlying detections; rig: the shutter offset the rig plans, relative "
+               "to the first camera's; phase: each shutter's (top row's) phase after sync, "
+               "relative to the first camera's (near rig when the shutters keep the plan)")
     rates = None if rig is None else _differing_rates(rig)
     if rig is None or rates is None:
         columns += ("; ideal: the type-A stagger i/(n·fps), shutters evenly spread over a "
