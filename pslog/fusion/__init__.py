@@ -512,8 +512,7 @@ def default_methods(
     options = options or FusionOptions()
     check_tolerance(rig, options.tolerance_s)
     detections = observations if isinstance(observations, Detections) else None
-    if detections is not None:
-        observations = timed_observations(detections, rig)
+    timed = timed_observations(detections, rig) if detections is not None else observations
 
     def shares(obs: Observations) -> tuple[bool, bool]:
         _, n_cameras = sync_groups(obs, len(rig), options.tolerance_s)
@@ -521,7 +520,8 @@ def default_methods(
             np.count_nonzero(n_cameras >= 2) >= SHARED_SHARE_MIN * len(n_cameras)),
             bool(np.any(n_cameras == 1)))
 
-    shared, alone = shares(observations)
+    assert isinstance(timed, Observations)
+    shared, alone = shares(timed)
     if (shared and detections is not None and options.gating and len(rig) >= 2
             and any(c.readout for c in rig.cameras)
             and np.any(detections.candidates_per_frame() > 1)):
