@@ -291,7 +291,9 @@ def format_quality_table(rows: list[QualitySummary]) -> str:
         [(r.method, _cell(r.residual_median_px, ".3f"), _cell(r.residual_p95_px, ".3f"),
           _cell(r.gap_max_ms, ".1f"), _cell(r.std_median_mm, ".3f"),
           _cell(r.within_2sigma * 100, ".1f", "%"), _cell(r.nees, ".2f")) for r in rows],
-        note=f"resid: median of each point's largest reprojection error; in 2σ: share of "
+        note=f"resid, p95: median and 95th percentile of each point's largest reprojection "
+             f"error; gap: the longest time span a point bridged; std: the median point's "
+             f"position standard deviation (std_m); in 2σ: share of "
              f"truth inside the covariance's 2σ ellipsoid ({CHI2_3D_2SIGMA * 100:.1f}% if "
              f"honest); NEES: mean d²/3 (1 if honest); -: no figure (in 2σ and NEES need "
              f"ground truth); σ 0: a zero covariance (NEES unbounded)")

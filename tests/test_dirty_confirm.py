@@ -287,7 +287,7 @@ def test_explain_type_a_and_the_viewer_leave_out_the_points_fuse_drops(tmp_path)
     path = tmp_path / "dirty.mcap"
     with SessionWriter(path, rig, timing="typeA", source="test") as writer:
         writer.add_detections(det)
-    shown, shown_construction, _ = _type_a_with_construction(read_session(path))
+    shown, shown_construction, _, _ = _type_a_with_construction(read_session(path))
     assert_array_equal(shown.time_ns, track.time_ns)
     assert len(shown_construction.event_row) == len(track)
 

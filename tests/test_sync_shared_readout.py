@@ -72,9 +72,13 @@ def test_cli_auto_keeps_a_readout_every_camera_shares_that_the_per_camera_test_m
     code, out, err = cli("sync", path, "-o", tmp_path / "t.mcap")
     assert code == 0, err
     assert "model (--estimate auto): offset, readout" in out
-    # (what is estimated said before the tests: one readout per camera, the table's; the
-    # session-37 wording, "readouts estimated: one readout per camera model", read as one)
-    assert (f"readouts estimated, one per camera (a test above its threshold calls for them): "
+    # (what is estimated said before the tests, as the table has it: here one readout per
+    # camera model, the three cameras' readouts tied (equal within the model); walk38: it
+    # read "one per camera" before the tests' "one readout per model", about one estimate)
+    assert report["shared_readout"] and readout["tied"]
+    assert len({c["readout_s"] for c in report["cameras"]}) == 1
+    assert (f"readouts estimated, one per camera model (a test above its threshold calls for "
+            f"them, and a model's cameras do not differ): "
             f"one readout per camera model (one model): Wald χ² "
             f"{readout['shared_wald_chi2']:.1f} on 1 dof > 12.1; per camera: χ² "
             f"{readout['wald_chi2']:.1f} on 3 dof <= 17.7") in out, out

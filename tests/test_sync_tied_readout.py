@@ -59,7 +59,7 @@ def test_cli_auto_ties_a_readout_every_camera_shares_and_lands_closer(tmp_path, 
     """paper3's three identical cameras, one 6 ms readout: the nested test keeps it, the
     equal-readouts statistic (2 dof) is far below its threshold, so auto estimates one
     readout: every camera the same value and σ, the stored covariance's readout rows
-    identical (rank one), fuse takes it (the 5 clock estimates in std_m) and smooth lands
+    identical (rank one), fuse takes it (the 3 clock estimates in std_m) and smooth lands
     closer to the truth than with the per-camera readouts (`--estimate offset,readout`).
     The explicit `readout=shared` gives the same clocks (within 0.25 σ: auto's second fit
     starts from its first, session 38). Fails without the tie (auto's
@@ -83,8 +83,10 @@ def test_cli_auto_ties_a_readout_every_camera_shares_and_lands_closer(tmp_path, 
     assert len(idx) == 3 and np.allclose(block, block[0, 0], rtol=1e-9, atol=0)
     assert np.isclose(np.sqrt(block[0, 0]), std, rtol=1e-9)
     tied_mm, tied_nees, said = _smooth(cli, tmp_path / "auto.mcap", tmp_path / "a_f.mcap")
-    assert "std_m includes the uncertainty of the 5 clock estimates" in said, said
-    assert "readout: cam1, cam2, cam3" in said
+    # (the tied readout said as one estimate, as sync says it; walk38: "the 5 clock
+    # estimates", "readout: cam1, cam2, cam3" of a sync that estimated 3)
+    assert "std_m includes the uncertainty of the 3 clock estimates" in said, said
+    assert "readout: one for cam1, cam2 and cam3 (per camera model)" in said
     percam = _sync_json(cli, path, tmp_path / "pc.mcap", "--estimate", "offset,readout")
     assert not percam["shared_readout"]
     assert len({c["readout_s"] for c in percam["cameras"]}) == 3

@@ -11,6 +11,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from functools import cached_property
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -26,8 +27,11 @@ from pslog.fusion import (
     type_a_prepared,
 )
 from pslog.log import Session, read_session
-from pslog.records import NS, Observations, Track
+from pslog.records import NS, Detections, Observations, Track
 from pslog.timing import observations as timed_observations
+
+if TYPE_CHECKING:
+    from pslog.fusion.gating import Rejections
 
 #: The method fused on the fly when a session has no stored track (it shows the paper's
 #: Figure 2 construction).
@@ -155,7 +159,10 @@ class ViewData:
     ----------
     session : the first session file, read without images
     paths : the session files, first one first
-    observations : the best candidate of every frame (fusion input), sorted by (time, camera)
+    observations : each frame's detection, sorted by (time, camera): the candidate the
+        gating of the first shown track stored with its rejections chose
+        (:func:`chosen_observations`; a frame whose every candidate it rejected: none), else
+        the best-scored one (fusion input without gating)
     tracks : display name -> Track, in display order
     construction : type-A construction behind the ``typeA`` track, or None
     window_ns : (lo, hi), int nanoseconds on the session clock; rows outside are left out
@@ -364,8 +371,10 @@ def load_view_data(session_paths: str | Path | Sequence[str | Path], *,
         if "typeA" in missing and len(session.rig) >= 2 and len(observations):
             # one gating and one type-A pass give the track and its Figure 2 construction
             # (what fuse_all and explain_type_a would each compute again, bit for bit)
-            tracks["typeA"], construction, construction_obs = _type_a_with_construction(
-                session)
+            # (and its gating's rejections, as a stored track has them: the images draw the
+            # ball the gate chose, not the best-scored candidate; walk38)
+            (tracks["typeA"], construction, construction_obs,
+             rejections["typeA"]) = _type_a_with_construction(session)
         rest = [m for m in missing if m != "typeA" or "typeA" not in tracks]
         if rest:
             tracks.update(fuse_all(session.detections, session.rig, rest,
@@ -416,10 +425,41 @@ def load_view_data(session_paths: str | Path | Sequence[str | Path], *,
         notes.append(f"the full-detail range {lo_s:g} to {hi_s:g} s holds no frame shown "
                      f"(the session spans 0 to {span:.3f} s): every frame's overlays are "
                      f"thinned to one in {choice.every}")
+    shown_rejections = {m: rejections[m] for m in shown if m in rejections}
+    if shown_rejections:
+        # each frame's detection as the gating of the track whose rejections the images draw
+        # chose it (its ray, epipolar lines, crop; the tracks' points matched to it), not the
+        # best-scored candidate: walk38, a static orange object outscored the ball, and 370
+        # of a webcam's 599 rays were drawn to the object, the ball's point beside them
+        observations = chosen_observations(session, next(iter(shown_rejections.values())))
     return ViewData(session, paths, observations, shown, construction, window, notes,
-                    {m: rejections[m] for m in shown if m in rejections},
-                    detail_ns=detail_ns, every=choice.every,
+                    shown_rejections, detail_ns=detail_ns, every=choice.every,
                     construction_observations=construction_obs)
+
+
+def rejected_candidates(detections: Detections, rejections) -> np.ndarray:
+    """(C,) bool over ``detections``' candidates: those ``rejections`` (a
+    :class:`pslog.fusion.gating.Rejections` stored with a track) holds, by camera, frame
+    and pixel."""
+    keys = set(zip(rejections.camera.tolist(), rejections.frame_index.tolist(),
+                   rejections.uv[:, 0].tolist(), rejections.uv[:, 1].tolist(), strict=True))
+    rows = detections.cand_frame
+    return np.array([k in keys for k in zip(
+        detections.frame_camera[rows].tolist(), detections.frame_index[rows].tolist(),
+        detections.cand_uv[:, 0].tolist(), detections.cand_uv[:, 1].tolist(), strict=True)],
+        dtype=bool)
+
+
+def chosen_observations(session: Session, rejections) -> Observations:
+    """The session's observations as a gating chose them: each frame's candidate that
+    ``rejections`` does not hold (a frame whose every candidate it holds: none), at its
+    corrected time, sorted by (time, camera) (:func:`pslog.timing.observations`)."""
+    det = session.detections
+    chosen = ~rejected_candidates(det, rejections)
+    kept = Detections(det.camera_names, det.frame_time_ns, det.frame_camera, det.frame_index,
+                      det.cand_frame[chosen], det.cand_uv[chosen], det.cand_radius[chosen],
+                      det.cand_score[chosen])
+    return timed_observations(kept, session.rig)
 
 
 def _type_a_prepared(session: Session) -> tuple[Observations, Prepared]:
@@ -430,18 +470,21 @@ def _type_a_prepared(session: Session) -> tuple[Observations, Prepared]:
 
 
 def _type_a_with_construction(session: Session
-                              ) -> tuple[Track, TypeAConstruction, Observations]:
+                              ) -> tuple[Track, TypeAConstruction, Observations, Rejections]:
     """``typeA`` fused from the session's detections as :func:`pslog.fusion.fuse_all`
     fuses it (gated, default options), its construction as
-    :func:`pslog.fusion.explain_type_a` explains it, from one gating and one pass, and the
-    observations both rest on."""
+    :func:`pslog.fusion.explain_type_a` explains it, from one gating and one pass, the
+    observations both rest on and the gating's rejections (as ``pslog fuse`` stores them)."""
     from pslog.fusion import check_tolerance
+    from pslog.fusion.gating import gate_for, prepared_for
 
     rig = session.rig
     options = for_session(FusionOptions(), session.metadata, rig)
     check_tolerance(rig, options.tolerance_s)
-    # (with the long-gap confirmation, as pslog fuse: the points it drops are not shown)
-    obs, prep = _type_a_prepared(session)
+    # (with the long-gap confirmation, as pslog fuse: the points it drops are not shown;
+    # gated as _type_a_prepared gates, its rejections kept)
+    gated = gate_for(session.detections, rig, "typeA", FusionOptions())
+    obs, prep = gated.observations, prepared_for(gated, rig)
     track, construction = type_a_explained(prep, rig, options)
     if options.clock_covariance is not None and len(track):
         # (as pslog fuse: the synced clocks' uncertainty in the covariance; points unchanged)
@@ -450,4 +493,4 @@ def _type_a_with_construction(session: Session
 
         track = with_clock_covariance(track, "typeA", prep, rig, replace(
             options, max_gap_s=options.max_gap_s or default_max_gap_s(rig)))
-    return track, construction, obs
+    return track, construction, obs, gated.rejections

@@ -15,7 +15,7 @@ from pslog.geometry import epipolar_lines, fundamental_matrices
 from pslog.motion import BALL_RADIUS
 
 from . import _columns as C
-from .data import ViewData
+from .data import ViewData, rejected_candidates
 
 
 def log_detections(rec, data: ViewData, clock: C.Clock) -> tuple[int, int]:
@@ -62,14 +62,7 @@ def gated_rejections(data: ViewData):
     track stored with its rejections (``pslog fuse``); None when none is."""
     if not data.rejections:
         return None
-    rej = next(iter(data.rejections.values()))
-    det = data.session.detections
-    keys = set(zip(rej.camera.tolist(), rej.frame_index.tolist(), rej.uv[:, 0].tolist(),
-                   rej.uv[:, 1].tolist(), strict=True))
-    rows = det.cand_frame
-    return np.array([k in keys for k in zip(
-        det.frame_camera[rows].tolist(), det.frame_index[rows].tolist(),
-        det.cand_uv[:, 0].tolist(), det.cand_uv[:, 1].tolist(), strict=True)], dtype=bool)
+    return rejected_candidates(data.session.detections, next(iter(data.rejections.values())))
 
 
 def overlay_track(data: ViewData) -> str | None:

@@ -209,7 +209,8 @@ def run(args: argparse.Namespace) -> int:
     if args.methods:
         methods = [check_method(m) for m in dict.fromkeys(args.methods)]
     else:  # every method this timing suits
-        methods = default_methods(observations, rig, options)
+        # (from the candidates: each frame's ball as the methods will choose it)
+        methods = default_methods(session.detections, rig, options)
         skipped = [m for m in METHODS if m not in methods]
         if skipped:
             print(f"not run on this timing: {', '.join(skipped)} (name them with --method "
@@ -457,11 +458,29 @@ def _say_clock_uncertainty(args: argparse.Namespace, session, applied) -> None:
     if applied is not None:
         replaced = 0 if synced is None else len(synced) - len(applied)
         names = session.rig.names  # (which ones: a user knows the cameras, not a count)
+        # (a readout pslog sync estimated once per camera model, tied: its cameras' rows of
+        # the covariance are one, T Σ Tᵀ; said as one estimate, as sync says it; walk38: the
+        # "5 clock estimates" of a sync that reported 4)
+        groups: list[list[int]] = []
+        for i in range(len(applied)):
+            same = next((g for g in groups if applied.parameter[g[0]] == applied.parameter[i]
+                         and np.allclose(applied.matrix[g[0]], applied.matrix[i], rtol=1e-12,
+                                         atol=0.0)), None)
+            if same is None:
+                groups.append([i])
+            else:
+                same.append(i)
+        def cameras(g: list[int]) -> str:
+            listed = [names[applied.camera[i]] for i in g]
+            if len(listed) == 1:
+                return listed[0]
+            return f"one for {', '.join(listed[:-1])} and {listed[-1]} (per camera model)"
+
         which = "; ".join(
-            f"{label}: {', '.join(names[c] for c in applied.camera[applied.parameter == p])}"
+            f"{label}: " + ", ".join(cameras(g) for g in groups if applied.parameter[g[0]] == p)
             for p, label in enumerate(("offset", "drift", "readout"))
             if np.any(applied.parameter == p))
-        print(f"std_m includes the uncertainty of the {len(applied)} clock estimates of "
+        print(f"std_m includes the uncertainty of the {len(groups)} clock estimates of "
               f"pslog sync ({which}; --clock-uncertainty off: the pixel noise alone)"
               + (f"; --rig {args.rig} replaced {replaced} other"
                  + ("s: none for them" if replaced > 1 else ": none for it")

@@ -133,7 +133,8 @@ def _text(info: dict) -> list[str]:
                      f"(original times = session times + origin; 'pslog export' adds it)")
     tracks = ", ".join(f"{m} ({n} points)" for m, n in info["tracks"].items()) or "none"
     lines.append(f"  truth: {'yes' if info['truth'] else 'no'}; tracks: {tracks}; "
-                 f"events: {info['events']}")
+                 f"events: {info['events']} (the recorder's notes, topic /events, e.g. a "
+                 f"camera that stopped)")
     lines.append(f"  (measured offsets are relative to {info['offset_reference']}, placed at its "
                  f"rig offset" + ("; measured on times the clock model corrects"
                                   if info["clock_corrected"] else "") + ")")

@@ -140,8 +140,13 @@ def _choice(result) -> str:
     for t in result.selection:
         plural = {"readout": "readouts", "drift": "drifts"}[t.parameter]
         # (the nested test of one readout per camera model beside the per-camera one:
-        # either calls for readouts, which are then estimated one per camera, the table's)
-        what = ("estimated, one per camera (a test above its threshold calls for them)"
+        # either calls for readouts, which are then estimated one per camera, or one per
+        # model when the test of equal readouts within each model does not reject (tied);
+        # walk38: a tied choice read "one per camera ...: one readout per model")
+        what = ("estimated, one per camera model (a test above its threshold calls for them, "
+                "and a model's cameras do not differ)"
+                if t.kept and t.parameter == "readout" and t.shared_dof and t.tied else
+                "estimated, one per camera (a test above its threshold calls for them)"
                 if t.kept and t.parameter == "readout" and t.shared_dof else
                 "estimated" if t.kept else "not estimated")
         lines.append(f"  {plural} {what}: {t.reason}")
@@ -174,10 +179,11 @@ def _legend(estimated, auto: bool = False, rig=None) -> str:
     (:func:`_differing_rates`); where it has not, the legend says why."""
     kept = [name for name in ("offset", "drift", "readout") if name not in estimated]
     columns = ("offset, drift: each camera's clock against the first camera's (ref), which "
-               "defines the session clock; readout: rolling shutter, top row to bottom row; "
-               "rig: the shutter offset the rig plans, relative to the first camera's; phase: "
-               "each shutter's phase after sync, relative to the first camera's (near rig when "
-               "the shutters keep the plan)")
+               "defines the session clock; σ: its standard deviation; readout: rolling "
+               "shutter, top row to bottom row; resid: the RMS reprojection residual of the "
+               "camera's inlying detections; rig: the shutter offset the rig plans, relative "
+               "to the first camera's; phase: each shutter's (top row's) phase after sync, "
+               "relative to the first camera's (near rig when the shutters keep the plan)")
     rates = None if rig is None else _differing_rates(rig)
     if rig is None or rates is None:
         columns += ("; ideal: the type-A stagger i/(n·fps), shutters evenly spread over a "
