@@ -1,0 +1,76 @@
+"""Session 38's hostile-input sweep of the commands recent sessions touched, through the real
+CLI on real files. ``pslog sync`` refused a session whose ball lies still longer than it
+moves (``pslog simulate --rest``, a robot-soccer ball on its spot before the kick) with "the
+ball barely moves", the median of its speed, although its moving stretch holds the clocks."""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import pytest
+
+from .promises import assert_one_line_error, assert_untouched, fingerprint, run_pslog
+
+
+@pytest.fixture(scope="module")
+def rest_start(tmp_path_factory) -> Path:
+    """A throw after 3 s of rest (the ball still at 2/3 of the detections), cam2's clock 4 ms
+    and cam3's -6 ms off."""
+    folder = tmp_path_factory.mktemp("sweep38")
+    done = run_pslog("simulate", "--rig", "paper3", "--timing", "typeA", "--motion", "throw",
+                     "--rest", "3", "--noise-px", "0.3", "--clock-offset", "cam2=4",
+                     "--clock-offset", "cam3=-6", "--seed", "38001", "-o", "rest.mcap",
+                     cwd=folder)
+    assert done.code == 0, done.stderr
+    return folder
+
+
+def test_sync_estimates_the_clocks_of_a_ball_still_most_of_the_session(rest_start, tmp_path):
+    before = fingerprint(rest_start)
+    run = run_pslog("sync", rest_start / "rest.mcap", "--estimate", "offset", "--json", "-o",
+                    tmp_path / "synced.mcap")
+    assert run.code == 0, run.stderr
+    cameras = {c["name"]: c for c in json.loads(run.stdout)["cameras"]}
+    for name, truth_ms in (("cam2", 4.0), ("cam3", -6.0)):
+        clock = cameras[name]
+        assert abs(clock["offset_s"] * 1e3 - truth_ms) < 4 * clock["offset_std_s"] * 1e3, clock
+        assert clock["offset_std_s"] < 1e-3, clock  # the throw determines them
+    assert (tmp_path / "synced.mcap").stat().st_size > 0
+    assert_untouched(before, rest_start)
+
+
+def test_sync_still_refuses_a_ball_that_never_moves_naming_the_moving_detections(tmp_path):
+    """3 s of rest and a throw's first 0.05 s: still refused, in one line that says how few
+    detections see the ball move."""
+    done = run_pslog("simulate", "--rig", "paper3", "--timing", "typeA", "--motion", "throw",
+                     "--duration", "0.05", "--rest", "3", "--noise-px", "0.3",
+                     "--seed", "38002", "-o", tmp_path / "still.mcap")
+    assert done.code == 0, done.stderr
+    run = run_pslog("sync", tmp_path / "still.mcap", "-o", tmp_path / "synced.mcap")
+    line = assert_one_line_error(run, 1, contains="the ball barely moves")
+    moving = re.search(r"faster than 0\.5 m/s at (\d+) of \d+ detections, sync needs 30",
+                       line)
+    assert moving and int(moving.group(1)) < 30, line
+    assert not (tmp_path / "synced.mcap").exists()
+
+
+@pytest.mark.parametrize("command", ["sync", "batch"])
+@pytest.mark.parametrize("estimate, says", [
+    ("offset,readout=bogus", "unknown item 'readout=bogus'"),
+    ("offsett,drif", "unknown items 'offsett', 'drif'"),
+    ("offset,readout,readout=shared", "names both readout and readout=shared"),
+    ("auto,offset", "'auto' stands alone"),
+    (",", "no parameter named")])
+def test_a_bad_estimate_list_names_its_bad_item(rest_start, tmp_path, command, estimate,
+                                                says):
+    """Each refusal said the same "'auto', or name parameters among offset, drift, readout",
+    for a list that named only those (``readout`` with ``readout=shared``) too."""
+    before = fingerprint(rest_start)
+    args = (("sync", rest_start / "rest.mcap", "-o", tmp_path / "s.mcap") if command == "sync"
+            else ("batch", f"{rest_start}/*.mcap", "--do", "sync", "-o", tmp_path / "out"))
+    run = run_pslog(*args, "--estimate", estimate)
+    assert_one_line_error(run, 2, contains=(f"--estimate: {estimate!r}: {says}",))
+    assert not (tmp_path / "s.mcap").exists() and not (tmp_path / "out").exists()
+    assert_untouched(before, rest_start)
