@@ -14,12 +14,19 @@ def _estimate_list(text: str) -> tuple[str, ...]:
     names = tuple(dict.fromkeys(p.strip() for p in text.split(",") if p.strip()))
     if names == ("auto",):
         return names
+    usage = (f"'auto', or name parameters among {', '.join(PARAMETERS)} (comma-separated; "
+             f"{SHARED_READOUT} instead of readout: one readout per camera model)")
     bad = [p for p in names if p not in (*PARAMETERS, SHARED_READOUT)]
-    if not names or bad or {"readout", SHARED_READOUT} <= set(names):
+    if not names or bad:
+        problem = ("no parameter named" if not names else
+                   "'auto' stands alone (it chooses the parameters)" if bad == ["auto"]
+                   else f"unknown {'items' if len(bad) > 1 else 'item'} "
+                   + ", ".join(repr(p) for p in bad))
+        raise argparse.ArgumentTypeError(f"{text!r}: {problem}; {usage}")
+    if {"readout", SHARED_READOUT} <= set(names):
         raise argparse.ArgumentTypeError(
-            f"{text!r}: 'auto', or name parameters among {', '.join(PARAMETERS)} "
-            f"(comma-separated; {SHARED_READOUT} instead of readout: one readout per "
-            f"camera model)")
+            f"{text!r}: names both readout and {SHARED_READOUT}; name one, "
+            f"{SHARED_READOUT} instead of readout (one readout per camera model)")
     return names
 
 
