@@ -292,6 +292,7 @@ def load_view_data(session_paths: str | Path | Sequence[str | Path], *,
              else tuple(Path(p) for p in session_paths))
     if not paths:
         raise InputError("no session file given")
+    from pslog.errors import shell_word
     from pslog.outputs import same_file
 
     for i, path in enumerate(paths):  # (its tracks would be shown twice, renamed)
@@ -310,6 +311,11 @@ def load_view_data(session_paths: str | Path | Sequence[str | Path], *,
         if other.rig.names != session.rig.names:
             raise InputError(f"{path}: cameras {', '.join(other.rig.names)} differ from "
                              f"{paths[0]}'s ({', '.join(session.rig.names)})")
+        if not other.tracks:  # (a session, or a synced copy: its rig is not the one shown)
+            notes.append(f"{path}: holds no fused track, so nothing of it is shown (the files "
+                         f"after the first add their tracks; to view it as the session: "
+                         f"'pslog view {shell_word(path)}')")
+            continue
         if not np.array_equal(other.detections.frame_time_ns, session.detections.frame_time_ns):
             notes.append(f"{path}: its frames are not {paths[0]}'s, so its tracks may come "
                          f"from another session")

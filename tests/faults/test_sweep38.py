@@ -74,3 +74,20 @@ def test_a_bad_estimate_list_names_its_bad_item(rest_start, tmp_path, command, e
     assert_one_line_error(run, 2, contains=(f"--estimate: {estimate!r}: {says}",))
     assert not (tmp_path / "s.mcap").exists() and not (tmp_path / "out").exists()
     assert_untouched(before, rest_start)
+
+
+def test_view_says_a_later_file_without_tracks_shows_nothing(rest_start, tmp_path):
+    """``pslog view session.mcap synced.mcap``: the synced copy holds no track, and nothing
+    of it was shown without a word (its rig's clocks neither): the user believed they saw
+    it."""
+    before = fingerprint(rest_start)
+    copy = tmp_path / "copy of rest.mcap"
+    copy.write_bytes((rest_start / "rest.mcap").read_bytes())
+    out = tmp_path / "v.rrd"
+    run = run_pslog("view", rest_start / "rest.mcap", copy, "--method", "nearest", "--frames",
+                    "none", "--save", out)
+    assert run.code == 0 and "Traceback" not in run.stderr, run.stderr
+    assert f"{copy}: holds no fused track, so nothing of it is shown" in run.stdout, run.stdout
+    assert f"'pslog view \"{copy}\"'" in run.stdout, run.stdout  # (a space: quoted)
+    assert out.stat().st_size > 0
+    assert_untouched(before, rest_start)
