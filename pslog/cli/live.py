@@ -196,7 +196,9 @@ def _run(args: argparse.Namespace, stop) -> int:
     from pslog.live.server import bind_udp, serve
     from pslog.rig import apply_timing, resolve_rig
 
-    if args.jsonl and sys.stdout is None:  # closed when Python started (``>&-``)
+    from pslog.outputs import stdout_closed
+
+    if args.jsonl and stdout_closed():  # closed when Python started (``>&-``)
         raise InputError("--jsonl cannot write to standard output: it is closed")
     rig = resolve_rig(args.rig)
     if args.timing:

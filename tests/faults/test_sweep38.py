@@ -6,6 +6,7 @@ ball barely moves", the median of its speed, although its moving stretch holds t
 from __future__ import annotations
 
 import json
+import os
 import re
 from pathlib import Path
 
@@ -90,4 +91,25 @@ def test_view_says_a_later_file_without_tracks_shows_nothing(rest_start, tmp_pat
     assert f"{copy}: holds no fused track, so nothing of it is shown" in run.stdout, run.stdout
     assert f"'pslog view \"{copy}\"'" in run.stdout, run.stdout  # (a space: quoted)
     assert out.stat().st_size > 0
+    assert_untouched(before, rest_start)
+
+
+def test_a_standard_output_closed_at_the_start_is_said_and_the_output_kept(rest_start,
+                                                                          tmp_path):
+    """``pslog eval F >&-`` (or info, sync, fuse...) printed into nothing and exited 0: the
+    one product of eval lost without a word. Now as a full standard output: the command runs
+    to its end, keeps its complete files and exits 1 in one line (view --stdout and live
+    --jsonl said it already)."""
+    before = fingerprint(rest_start)
+    synced = tmp_path / "synced.mcap"
+    run = run_pslog("sync", rest_start / "rest.mcap", "--estimate", "offset", "-o", synced,
+                    preexec_fn=lambda: os.close(1))
+    assert_one_line_error(run, 1, contains=(
+        "cannot write to standard output: it is closed", f"{synced} written complete"))
+    fused = tmp_path / "fused.mcap"
+    run = run_pslog("fuse", synced, "--method", "nearest", "-o", fused)
+    assert run.code == 0, run.stderr
+    for args in (("eval", fused, "--json"), ("info", synced)):
+        run = run_pslog(*args, preexec_fn=lambda: os.close(1))
+        assert_one_line_error(run, 1, contains="cannot write to standard output: it is closed")
     assert_untouched(before, rest_start)
