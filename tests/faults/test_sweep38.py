@@ -113,3 +113,24 @@ def test_a_standard_output_closed_at_the_start_is_said_and_the_output_kept(rest_
         run = run_pslog(*args, preexec_fn=lambda: os.close(1))
         assert_one_line_error(run, 1, contains="cannot write to standard output: it is closed")
     assert_untouched(before, rest_start)
+
+
+def test_recover_says_a_synced_sessions_clocks_went_with_its_metadata(rest_start, tmp_path):
+    """A synced session whose metadata record is damaged: ``pslog recover`` rebuilds the rig
+    from the calibration messages, which hold no clock; it said "check it" and nothing of
+    the clocks, and the copy then fused with the nominal ones without a word."""
+    synced = tmp_path / "synced.mcap"
+    run = run_pslog("sync", rest_start / "rest.mcap", "--estimate", "offset", "-o", synced)
+    assert run.code == 0, run.stderr
+    data = bytearray(synced.read_bytes())
+    data[400] ^= 0xFF  # inside the session metadata record's strings (it has no CRC)
+    damaged = tmp_path / "damaged.mcap"
+    damaged.write_bytes(bytes(data))
+    fixed = tmp_path / "fixed.mcap"
+    run = run_pslog("recover", damaged, "-o", fixed)
+    assert run.code == 0 and "Traceback" not in run.stderr, run.stderr
+    line = next(x for x in run.stdout.splitlines() if "session metadata" in x)
+    assert "lost with it: the clocks pslog sync estimated" in line, line
+    assert f"run 'pslog sync {fixed} -o SYNCED.mcap' again" in line, line
+    shown = run_pslog("rig", "show", fixed)
+    assert shown.code == 0 and "clock_offset" not in shown.stdout  # (what it says: gone)
