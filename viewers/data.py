@@ -112,8 +112,10 @@ class DetailChoice:
         """``all`` (no thinning), ``S`` (the first S seconds shown) or ``A:B`` (seconds
         after the session's first frame); ``every`` the thinning factor beyond it."""
         text = str(text).strip()
-        if isinstance(every, bool) or not isinstance(every, int) or every < 1:
-            raise InputError(f"the thinning factor must be a whole number >= 1, got {every!r}")
+        if (isinstance(every, bool) or not isinstance(every, int) or every < 1
+                or every > FramesChoice.MAX_EVERY):  # (10**23: a traceback, its bucket's ns)
+            raise InputError(f"the thinning factor must be a whole number from 1 to "
+                             f"{FramesChoice.MAX_EVERY}, got {every!r}")
         if text == "all":
             return cls(None, None, every)
         try:
@@ -209,7 +211,8 @@ class ViewData:
         one frame in ``every``."""
         fps = min((c.fps for c in self.session.rig.cameras), default=30.0)
         period = max(1, round(NS / fps))
-        return self.every * period, period
+        # (at most 2**62 ns, 146 years: an int64 still; a longer bucket keeps the same frames)
+        return min(self.every * period, 2**62), period
 
     def in_detail(self, time_ns: np.ndarray) -> np.ndarray:
         """Mask (n,) of times within the full-detail range."""

@@ -134,3 +134,24 @@ def test_recover_says_a_synced_sessions_clocks_went_with_its_metadata(rest_start
     assert f"run 'pslog sync {fixed} -o SYNCED.mcap' again" in line, line
     shown = run_pslog("rig", "show", fixed)
     assert shown.code == 0 and "clock_offset" not in shown.stdout  # (what it says: gone)
+
+
+@pytest.mark.parametrize("every, code", [("99999999999999999999999", 2), ("1000000001", 2),
+                                          ("1000000000", 0)])
+def test_view_thin_every_beyond_an_int64_bucket_is_refused(rest_start, tmp_path, every, code):
+    """``view --thin-every 99999999999999999999999`` was a traceback (OverflowError: the
+    thinning bucket, every × a frame period in ns, no int64 holds); bounded as
+    ``--frames every:N`` is."""
+    before = fingerprint(rest_start)
+    out = tmp_path / "v.rrd"
+    run = run_pslog("view", rest_start / "rest.mcap", "--method", "nearest", "--frames",
+                    "none", "--thin-every", every, "--save", out)
+    if code:
+        assert_one_line_error(run, 2, contains=(
+            "--thin-every: the thinning factor must be a whole number from 1 to 1000000000, "
+            f"got {every}"))
+        assert not out.exists()
+    else:
+        assert run.code == 0 and "Traceback" not in run.stderr, run.stderr
+        assert out.stat().st_size > 0
+    assert_untouched(before, rest_start)
