@@ -155,3 +155,23 @@ def test_view_thin_every_beyond_an_int64_bucket_is_refused(rest_start, tmp_path,
         assert run.code == 0 and "Traceback" not in run.stderr, run.stderr
         assert out.stat().st_size > 0
     assert_untouched(before, rest_start)
+
+
+def test_fuse_says_the_gating_rejected_the_detections_a_point_lacked(tmp_path):
+    """Two detections 11 ms apart whose rays disagree (a rig or calibration off): no point,
+    said as "too few detections close enough in time" alone, which sends a user to the
+    clocks; the gating had rejected the second, and --gating off fuses it."""
+    (tmp_path / "det.csv").write_text("camera,time,u,v\ncam1,0.0,320,240\n"
+                                      "cam2,0.011,300,250\n")
+    run = run_pslog("import", "--rig", "paper3", "--timing", "typeA", "--detections",
+                    "det.csv", "-o", "s.mcap", cwd=tmp_path)
+    assert run.code == 0, run.stderr
+    run = run_pslog("fuse", "s.mcap", "--method", "nearest", "-o", "f.mcap", cwd=tmp_path)
+    assert_one_line_error(run, 1, contains="no fusion method produced a point")
+    assert ("no point from nearest: too few detections close enough in time once the gating "
+            "rejected 1 candidate (epipolar 1; --gating off: each frame's best-scored "
+            "candidate)") in run.stdout, run.stdout
+    assert not (tmp_path / "f.mcap").exists()
+    run = run_pslog("fuse", "s.mcap", "--method", "nearest", "--gating", "off", "-o",
+                    "f.mcap", cwd=tmp_path)
+    assert run.code == 0 and "nearest        1 points" in run.stdout, run.stdout + run.stderr
