@@ -175,3 +175,28 @@ def test_fuse_says_the_gating_rejected_the_detections_a_point_lacked(tmp_path):
     run = run_pslog("fuse", "s.mcap", "--method", "nearest", "--gating", "off", "-o",
                     "f.mcap", cwd=tmp_path)
     assert run.code == 0 and "nearest        1 points" in run.stdout, run.stdout + run.stderr
+
+
+def test_import_names_a_tracks_export_or_json_given_as_detections(rest_start, tmp_path):
+    """``pslog export --csv``'s tracks (or ``--jsonl``'s lines) given to ``pslog import``
+    were "bad header '<the whole first line>' ... (unknown: <every column>)": the JSON
+    line's message ran to hundreds of characters, twice over, and neither said what the
+    file is."""
+    fused = tmp_path / "fused.mcap"
+    run = run_pslog("fuse", rest_start / "rest.mcap", "--method", "nearest", "-o", fused)
+    assert run.code == 0, run.stderr
+    run = run_pslog("export", fused, "--csv", tmp_path / "t.csv", "--jsonl", tmp_path / "t.jsonl")
+    assert run.code == 0, run.stderr
+    for name, says in (("t.csv", "holds fused tracks (time,x,y,z,camera,method: 'pslog "
+                                 "export --csv'), not detections"),
+                       ("t.jsonl", "holds JSON, not a detections CSV")):
+        run = run_pslog("import", "--rig", "paper3", "--detections", tmp_path / name, "-o",
+                        tmp_path / "s.mcap")
+        line = assert_one_line_error(run, 1, contains=f"{tmp_path / name} {says}")
+        assert len(line) < 300, line
+    (tmp_path / "wide.csv").write_text(",".join(f"c{i}" for i in range(5000)) + "\n")
+    run = run_pslog("import", "--rig", "paper3", "--detections", tmp_path / "wide.csv", "-o",
+                    tmp_path / "s.mcap")
+    line = assert_one_line_error(run, 1, contains=("line 1: bad header", "c9, ...)"))
+    assert len(line) < 600, line
+    assert not (tmp_path / "s.mcap").exists()
