@@ -200,3 +200,26 @@ def test_import_names_a_tracks_export_or_json_given_as_detections(rest_start, tm
     line = assert_one_line_error(run, 1, contains=("line 1: bad header", "c9, ...)"))
     assert len(line) < 600, line
     assert not (tmp_path / "s.mcap").exists()
+
+
+@pytest.mark.parametrize("command", [("sync", "-o", "out.mcap"), ("fuse", "-o", "out.mcap"),
+                                     ("eval",), ("info",), ("view", "--save", "out.rrd"),
+                                     ("recover", "-o", "out.mcap")])
+def test_an_empty_file_or_a_csv_given_as_a_session_is_named_for_what_it_is(tmp_path,
+                                                                          command):
+    """A 0-byte file (a recording killed before its first write), the detections CSV a
+    session was imported from and a tracks export were each "not an MCAP file: P"."""
+    (tmp_path / "empty.mcap").write_bytes(b"")
+    (tmp_path / "det.csv").write_text("\ufeffcamera,time,u,v\ncam1,0.0,320,240\n")
+    (tmp_path / "tracks.csv").write_text("time,x,y,z,camera,method\n0.1,1,2,3,cam1,typeA\n")
+    before = fingerprint(tmp_path)
+    name, *rest = command
+    for given, says in (("empty.mcap", "empty.mcap is empty (0 bytes): not an MCAP session"),
+                        ("det.csv", "det.csv is a detections CSV, not an MCAP session "
+                                    "('pslog import --rig RIG --detections det.csv -o "
+                                    "SESSION.mcap' makes one)"),
+                        ("tracks.csv", "tracks.csv is a CSV of fused tracks ('pslog export "
+                                       "--csv'), not an MCAP session")):
+        run = run_pslog(name, given, *rest, cwd=tmp_path)
+        assert_one_line_error(run, 1, contains=f"pslog {name}: error: {says}")
+    assert_untouched(before, tmp_path)
