@@ -110,12 +110,32 @@ def run(args: argparse.Namespace) -> int:
     if auto:
         print(_choice(result))
     elif result.shared_readout:
-        print("readouts: one per camera model (readout=shared): its cameras share the "
-              "value and its standard deviation")
+        print(_shared_readout_line(result.rig))
     print(_legend(estimated, auto, result.rig))
     print(f"residual {result.residual_px:.3f} px (pixel noise {result.noise_px:.3f} px); "
           f"wrote {args.output}")
     return 0
+
+
+def _shared_readout_line(rig) -> str:
+    """``readout=shared``: which cameras share a readout (a model: image size and frame
+    rate); where no two cameras are of one model it said "its cameras share the value"
+    beside three different readouts, and the estimate is readout's, per camera."""
+    import numpy as np
+
+    from pslog.estimation.sync import camera_models
+
+    models = camera_models(rig, range(len(rig)))
+    groups = [[rig.cameras[c].name for c in np.flatnonzero(models == m)]
+              for m in range(int(models.max()) + 1)]
+    if all(len(g) == 1 for g in groups):
+        return ("readouts: one per camera model (readout=shared), and no two cameras here "
+                "are of one model (image size and frame rate): one readout per camera, as "
+                "readout estimates")
+    return ("readouts: one per camera model (readout=shared): "
+            + "; ".join(f"{', '.join(g)} share one" if len(g) > 1 else f"{g[0]} its own"
+                        for g in groups)
+            + " (the value and its standard deviation)")
 
 
 def _test_json(test) -> dict:

@@ -1,7 +1,13 @@
 """Session 38's hostile-input sweep of the commands recent sessions touched, through the real
 CLI on real files. ``pslog sync`` refused a session whose ball lies still longer than it
 moves (``pslog simulate --rest``, a robot-soccer ball on its spot before the kick) with "the
-ball barely moves", the median of its speed, although its moving stretch holds the clocks."""
+ball barely moves", the median of its speed, although its moving stretch holds the clocks.
+The rest are messages that did not name the problem (``--estimate`` lists, ``fuse``'s
+no-point line when the gating had rejected the detections, ``import`` of a tracks export,
+an empty file or a CSV given as a session, ``readout=shared`` without shared models), a
+file shown as nothing without a word (``view`` of a synced copy; ``recover`` losing a
+synced session's clocks), a standard output closed at the start (exit 0, nothing printed)
+and a traceback (``view --thin-every 1e23``)."""
 
 from __future__ import annotations
 
@@ -223,3 +229,25 @@ def test_an_empty_file_or_a_csv_given_as_a_session_is_named_for_what_it_is(tmp_p
         run = run_pslog(name, given, *rest, cwd=tmp_path)
         assert_one_line_error(run, 1, contains=f"pslog {name}: error: {says}")
     assert_untouched(before, tmp_path)
+
+
+def test_sync_readout_shared_says_which_cameras_share_one(tmp_path):
+    """``--estimate readout=shared`` on a rig whose cameras are each a model of their own
+    (frame rates 30, 25, 60) said "its cameras share the value" beside three readouts."""
+    shown = run_pslog("rig", "show", "paper3", "--timing", "sync")
+    assert shown.code == 0, shown.stderr
+    head, cam1, cam2, cam3 = shown.stdout.split("[[camera]]")
+    cam2, cam3 = cam2.replace("fps = 30.0", "fps = 25.0"), cam3.replace("fps = 30.0",
+                                                                       "fps = 60.0")
+    (tmp_path / "rig.toml").write_text("[[camera]]".join((head, cam1, cam2, cam3)))
+    run = run_pslog("simulate", "--rig", "rig.toml", "--motion", "rally", "--duration", "4",
+                    "--noise-px", "0.3", "--readout", "15", "--seed", "38003", "-o", "s.mcap",
+                    cwd=tmp_path)
+    assert run.code == 0, run.stderr
+    run = run_pslog("sync", "s.mcap", "--estimate", "readout=shared", "-o", "y.mcap",
+                    cwd=tmp_path)
+    assert run.code == 0, run.stderr
+    assert ("readouts: one per camera model (readout=shared), and no two cameras here are "
+            "of one model (image size and frame rate): one readout per camera, as readout "
+            "estimates") in run.stdout, run.stdout
+    assert "its cameras share the value" not in run.stdout
