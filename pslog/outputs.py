@@ -51,6 +51,30 @@ except ImportError:  # Windows
     fcntl = None  # type: ignore[assignment]  # the usual optional-module idiom
 
 
+class ClosedStdout(io.TextIOBase):
+    """``sys.stdout`` of a command started with standard output closed (``>&-``, where
+    Python sets it to None and every ``print`` vanishes: ``pslog eval F >&-`` printed nothing
+    and exited 0). Its first write fails, as a full one does, so the CLI says it in one line
+    and exits 1 once the command has run to its end (its files complete, kept); never a
+    descriptor (1 may be a file the command opened since)."""
+
+    def writable(self) -> bool:
+        return True
+
+    def write(self, text: str) -> int:
+        raise OSError(errno.EBADF, "it is closed")
+
+    def flush(self) -> None:
+        pass  # nothing was written
+
+
+def stdout_closed() -> bool:
+    """True when standard output was closed as the process started (``>&-``): ``sys.stdout``
+    is None, or the CLI's :class:`ClosedStdout` in its guard."""
+    stream = sys.stdout
+    return stream is None or isinstance(getattr(stream, "_stream", stream), ClosedStdout)
+
+
 class WriteError(PslogError):
     """The operating system refused a write (full disk, read-only file system, size limit,
     permissions): ``cannot write <path>: <reason>``; ``reason`` holds the OS's words alone."""

@@ -116,8 +116,10 @@ class DetailChoice:
         """``all`` (no thinning), ``S`` (the first S seconds shown) or ``A:B`` (seconds
         after the session's first frame); ``every`` the thinning factor beyond it."""
         text = str(text).strip()
-        if isinstance(every, bool) or not isinstance(every, int) or every < 1:
-            raise InputError(f"the thinning factor must be a whole number >= 1, got {every!r}")
+        if (isinstance(every, bool) or not isinstance(every, int) or every < 1
+                or every > FramesChoice.MAX_EVERY):  # (10**23: a traceback, its bucket's ns)
+            raise InputError(f"the thinning factor must be a whole number from 1 to "
+                             f"{FramesChoice.MAX_EVERY}, got {every!r}")
         if text == "all":
             return cls(None, None, every)
         try:
@@ -216,7 +218,8 @@ class ViewData:
         one frame in ``every``."""
         fps = min((c.fps for c in self.session.rig.cameras), default=30.0)
         period = max(1, round(NS / fps))
-        return self.every * period, period
+        # (at most 2**62 ns, 146 years: an int64 still; a longer bucket keeps the same frames)
+        return min(self.every * period, 2**62), period
 
     def in_detail(self, time_ns: np.ndarray) -> np.ndarray:
         """Mask (n,) of times within the full-detail range."""
@@ -299,6 +302,7 @@ def load_view_data(session_paths: str | Path | Sequence[str | Path], *,
              else tuple(Path(p) for p in session_paths))
     if not paths:
         raise InputError("no session file given")
+    from pslog.errors import shell_word
     from pslog.outputs import same_file
 
     for i, path in enumerate(paths):  # (its tracks would be shown twice, renamed)
@@ -317,6 +321,11 @@ def load_view_data(session_paths: str | Path | Sequence[str | Path], *,
         if other.rig.names != session.rig.names:
             raise InputError(f"{path}: cameras {', '.join(other.rig.names)} differ from "
                              f"{paths[0]}'s ({', '.join(session.rig.names)})")
+        if not other.tracks:  # (a session, or a synced copy: its rig is not the one shown)
+            notes.append(f"{path}: holds no fused track, so nothing of it is shown (the files "
+                         f"after the first add their tracks; to view it as the session: "
+                         f"'pslog view {shell_word(path)}')")
+            continue
         if not np.array_equal(other.detections.frame_time_ns, session.detections.frame_time_ns):
             notes.append(f"{path}: its frames are not {paths[0]}'s, so its tracks may come "
                          f"from another session")

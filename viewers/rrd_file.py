@@ -242,7 +242,9 @@ def rrd_stdout(rec: rr.RecordingStream) -> Iterator[None]:
     StdoutWriteError : any other failed write; the message names standard output and the
         operating system's reason
     """
-    if sys.stdout is None:  # closed when Python started: descriptor 1 may be another file
+    from pslog.outputs import stdout_closed
+
+    if stdout_closed():  # closed when Python started: descriptor 1 may be another file
         raise StdoutWriteError("cannot write to standard output: it is closed",
                                "Bad file descriptor")
     try:

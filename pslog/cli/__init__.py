@@ -266,6 +266,10 @@ def _main(argv: list[str] | None) -> int:
     real_stdout = sys.stdout  # None when started with standard output closed
     if real_stdout is not None:
         sys.stdout = _GuardedStdout(real_stdout)
+    else:  # (``>&-``: a print vanished; now its first fails, said as a full stdout is)
+        from pslog.outputs import ClosedStdout
+
+        sys.stdout = _GuardedStdout(ClosedStdout())
     restore_termination = _termination_interrupts()
     try:
         _release_sigint()  # only now: a KeyboardInterrupt in a C extension's import (numpy,

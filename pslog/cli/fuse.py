@@ -254,6 +254,7 @@ def run(args: argparse.Namespace) -> int:
     # points, left out, gated, flagged, made from the detections after them
     written: dict[str, tuple[int, dict[str, int], int, int, int]] = {}
     empty: dict[str, dict[str, int]] = {}  # method: its left-out counts
+    empty_rejected: dict[str, dict[str, int]] = {}  # method: its gating's rejections
     early: dict[str, int] = {}
     still: dict[str, int] = {}  # candidates rejected as a still object, by method
     try:
@@ -274,6 +275,7 @@ def run(args: argparse.Namespace) -> int:
                         still[method] = _still_rejections(rejected)
                     if len(track) == 0:
                         empty[method] = dropped
+                        empty_rejected[method] = rejected.counts() if options.gating else {}
                         continue
                     # a camera whose clock runs behind camera 1's has true times before the
                     # session clock's zero, which a session cannot store: left out, said
@@ -305,7 +307,8 @@ def run(args: argparse.Namespace) -> int:
                       f"a static object (nor from a second orange object in view): if they "
                       f"are the ball, run with --gating off to fuse them")
             for method in (m for m in methods if m in empty):
-                print(_no_point(method, empty[method], args.type_a_max_std_mm))
+                print(_no_point(method, empty[method], args.type_a_max_std_mm,
+                                empty_rejected.get(method, {})))
             if not written:
                 raise FusionError(f"no fusion method produced a point from the "
                                   f"{n_observations} detections of {args.session}")
@@ -351,11 +354,20 @@ NO_BREAK_SPANNED = ("typeA: --confirm-gaps breaks changed no point: none spanned
                     "construction reaches across): every point is the paper's")
 
 
-def _no_point(method: str, dropped: dict[str, int], max_std_mm: float | None) -> str:
+def _no_point(method: str, dropped: dict[str, int], max_std_mm: float | None,
+              rejected: dict[str, int] | None = None) -> str:
     """The line saying why ``method`` gave no point: every point it found left out (by
-    reason, ``uncertain`` naming --type-a-max-std-mm's bound), or none found."""
+    reason, ``uncertain`` naming --type-a-max-std-mm's bound), or none found; the
+    candidates the gating rejected (``rejected``: count by reason) said with it: they may be
+    the detections a point lacked ("too few detections close enough in time" alone, when
+    the gating had rejected them, sent a user to the clocks)."""
+    n = sum((rejected or {}).values())
+    gated = (f"the gating rejected {n} candidate{'s' if n > 1 else ''} ("
+             + ", ".join(f"{r} {k}" for r, k in (rejected or {}).items() if k)
+             + "; --gating off: each frame's best-scored candidate)" if n else "")
     if not dropped:
-        return f"no point from {method}: too few detections close enough in time"
+        return (f"no point from {method}: too few detections close enough in time"
+                + (f" once {gated}" if gated else ""))
     total = sum(dropped.values())
     if set(dropped) == {"uncertain"} and max_std_mm is not None:
         return (f"no point from {method}: all {total} {method} points withheld: std above "
@@ -364,7 +376,7 @@ def _no_point(method: str, dropped: dict[str, int], max_std_mm: float | None) ->
     bound = (f"; uncertain: std above --type-a-max-std-mm {max_std_mm:g} mm"
              if "uncertain" in dropped and max_std_mm is not None else "")
     return (f"no point from {method}: all {total} points left out, untrustworthy: "
-            f"{why}{bound}")
+            f"{why}{bound}" + (f"; {gated}" if gated else ""))
 
 
 #: glibc's mallopt parameter of the most malloc arenas (malloc.h)

@@ -185,7 +185,6 @@ def _say(text: str) -> None:
 
 
 def _run(args: argparse.Namespace, stop) -> int:
-    import sys
     import threading
     import time
 
@@ -194,9 +193,10 @@ def _run(args: argparse.Namespace, stop) -> int:
     from pslog.errors import InputError
     from pslog.live.fuser import warm_up
     from pslog.live.server import bind_udp, serve
+    from pslog.outputs import stdout_closed
     from pslog.rig import apply_timing, resolve_rig
 
-    if args.jsonl and sys.stdout is None:  # closed when Python started (``>&-``)
+    if args.jsonl and stdout_closed():  # closed when Python started (``>&-``)
         raise InputError("--jsonl cannot write to standard output: it is closed")
     rig = resolve_rig(args.rig)
     if args.timing:

@@ -18,6 +18,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from pslog.errors import shell_word
     from pslog.log import recover_session
     from pslog.log.recover import damage_line, describe_salvage
 
@@ -25,10 +26,14 @@ def run(args: argparse.Namespace) -> int:
     # recover_session leaves nothing half-written
     report = recover_session(args.session, args.output, force=args.force)
     if report["rebuilt_metadata"]:
+        # (what those messages do not hold is lost with the record: said, as a fuse of the
+        # copy would take the nominal clocks without a word)
         print("the session metadata (rig, cameras) was damaged: rebuilt from the cameras' "
               "calibration and pose messages, frame rates and offsets from the detections' "
-              "times (check it: 'pslog rig show FIXED.mcap')".replace("FIXED.mcap",
-                                                                      str(args.output)))
+              "times (check it: 'pslog rig show FIXED.mcap'); lost with it: the clocks "
+              "pslog sync estimated, if it was synced (run 'pslog sync FIXED.mcap -o "
+              "SYNCED.mcap' again), and the detector settings".replace(
+                  "FIXED.mcap", shell_word(args.output)))
     for d in report["repaired"]:
         print(f"repaired the record at bytes {d['start']}..{d['end']}: {d['reason']}; kept "
               f"exactly as the file's index locates it")

@@ -14,12 +14,19 @@ def _estimate_list(text: str) -> tuple[str, ...]:
     names = tuple(dict.fromkeys(p.strip() for p in text.split(",") if p.strip()))
     if names == ("auto",):
         return names
+    usage = (f"'auto', or name parameters among {', '.join(PARAMETERS)} (comma-separated; "
+             f"{SHARED_READOUT} instead of readout: one readout per camera model)")
     bad = [p for p in names if p not in (*PARAMETERS, SHARED_READOUT)]
-    if not names or bad or {"readout", SHARED_READOUT} <= set(names):
+    if not names or bad:
+        problem = ("no parameter named" if not names else
+                   "'auto' stands alone (it chooses the parameters)" if bad == ["auto"]
+                   else f"unknown {'items' if len(bad) > 1 else 'item'} "
+                   + ", ".join(repr(p) for p in bad))
+        raise argparse.ArgumentTypeError(f"{text!r}: {problem}; {usage}")
+    if {"readout", SHARED_READOUT} <= set(names):
         raise argparse.ArgumentTypeError(
-            f"{text!r}: 'auto', or name parameters among {', '.join(PARAMETERS)} "
-            f"(comma-separated; {SHARED_READOUT} instead of readout: one readout per "
-            f"camera model)")
+            f"{text!r}: names both readout and {SHARED_READOUT}; name one, "
+            f"{SHARED_READOUT} instead of readout (one readout per camera model)")
     return names
 
 
@@ -104,12 +111,32 @@ def run(args: argparse.Namespace) -> int:
     if auto:
         print(_choice(result))
     elif result.shared_readout:
-        print("readouts: one per camera model (readout=shared): its cameras share the "
-              "value and its standard deviation")
+        print(_shared_readout_line(result.rig))
     print(_legend(estimated, auto, result.rig))
     print(f"residual {result.residual_px:.3f} px (pixel noise {result.noise_px:.3f} px); "
           f"wrote {args.output}")
     return 0
+
+
+def _shared_readout_line(rig) -> str:
+    """``readout=shared``: which cameras share a readout (a model: image size and frame
+    rate); where no two cameras are of one model it said "its cameras share the value"
+    beside three different readouts, and the estimate is readout's, per camera."""
+    import numpy as np
+
+    from pslog.estimation.sync import camera_models
+
+    models = camera_models(rig, range(len(rig)))
+    groups = [[rig.cameras[c].name for c in np.flatnonzero(models == m)]
+              for m in range(int(models.max()) + 1)]
+    if all(len(g) == 1 for g in groups):
+        return ("readouts: one per camera model (readout=shared), and no two cameras here "
+                "are of one model (image size and frame rate): one readout per camera, as "
+                "readout estimates")
+    return ("readouts: one per camera model (readout=shared): "
+            + "; ".join(f"{', '.join(g)} share one" if len(g) > 1 else f"{g[0]} its own"
+                        for g in groups)
+            + " (the value and its standard deviation)")
 
 
 def _test_json(test) -> dict:

@@ -138,7 +138,9 @@ def run(args: argparse.Namespace) -> int:
         if wrong:
             return usage_error("view", wrong)
     elif args.stdout:
-        if sys.stdout is None:  # closed when Python started (``>&-``): said before reading
+        from pslog.outputs import stdout_closed
+
+        if stdout_closed():  # closed when Python started (``>&-``): said before reading
             raise PslogError("cannot write to standard output: it is closed")
     else:  # ports and viewer checked before the data is read: errors come out first
         kind = "serve" if args.serve else "connect" if args.connect else "spawn"

@@ -89,6 +89,16 @@ def check_file(path, header: bool = True) -> tuple[Path, int, bool]:
             raise LogFormatError(f"{path}: the MCAP magic (bytes 0..7) is damaged; run "
                                  f"'pslog recover {shell_word(path)}"
                                  f" -o FIXED.mcap' to salvage the data")
+        if size == 0:  # ("not an MCAP file" named no problem a user could see)
+            raise LogFormatError(f"{path} is empty (0 bytes): not an MCAP session")
+        csv = _csv_kind(path)
+        if csv == "detections":
+            raise LogFormatError(f"{path} is a detections CSV, not an MCAP session ('pslog "
+                                 f"import --rig RIG --detections {shell_word(path)} -o "
+                                 f"SESSION.mcap' makes one)")
+        if csv == "tracks":
+            raise LogFormatError(f"{path} is a CSV of fused tracks ('pslog export --csv'), "
+                                 f"not an MCAP session")
         raise LogFormatError(f"not an MCAP file: {path}")
     # ``complete``: the closing magic written by a finished writer
     complete = tail == MAGIC
@@ -812,6 +822,21 @@ def salvage_file(path, on_message=None, scan: Scan | None = None,
     with open(path, "rb") as f, mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as buf:
         _salvage(buf, on_message, scan)
     return scan
+
+
+def _csv_kind(path: Path) -> str | None:
+    """``detections`` or ``tracks`` when ``path`` starts as pslog's CSV of that kind (its
+    header; a byte-order mark allowed), else None: a reader given one says so."""
+    try:
+        with open(path, "rb") as f:
+            start = f.read(64).removeprefix(b"\xef\xbb\xbf")
+    except OSError:
+        return None
+    if start.startswith(b"camera,time,u,v"):
+        return "detections"
+    if start.startswith(b"time,x,y,z,camera,method"):
+        return "tracks"
+    return None
 
 
 def _magic_damaged(path: Path) -> bool:

@@ -197,9 +197,20 @@ def read_detections_csv(path, rig: Rig) -> Detections:
         header = [h.strip() for h in header]
         unknown = [h for h in header if h not in DETECTION_COLUMNS]
         missing = [h for h in _REQUIRED if h not in header]
+        if tuple(header[:len(TRACK_COLUMNS)]) == TRACK_COLUMNS:  # (pslog export --csv's)
+            raise InputError(f"{path} holds fused tracks ({','.join(TRACK_COLUMNS)}: "
+                             f"'pslog export --csv'), not detections: a detections CSV "
+                             f"is header camera,time,u,v ('pslog export SESSION.mcap "
+                             f"--detections DET.csv' writes one)")
         if unknown or missing or len(set(header)) != len(header):
+            if header and header[0].startswith(("{", "[")):  # (--jsonl's, any JSON)
+                raise InputError(f"{path} holds JSON, not a detections CSV (header "
+                                 f"camera,time,u,v)")
+            shown = ",".join(header)
+            shown = shown if len(shown) <= 200 else shown[:200] + "..."  # (one line, short)
+            unknown = unknown if len(unknown) <= 10 else [*unknown[:10], "..."]
             raise InputError(
-                f"{path}: line 1: bad header {','.join(header)!r}: expected columns "
+                f"{path}: line 1: bad header {shown!r}: expected columns "
                 f"camera,time,u,v and optionally frame,score"
                 + (f" (unknown: {', '.join(unknown)})" if unknown else "")
                 + (f" (missing: {', '.join(missing)})" if missing else ""))
