@@ -224,7 +224,8 @@ def _is_session_file(path: Path) -> bool:
 
 
 def resolve_rig(name_or_path: str | Path, timing_from: Rig | None = None,
-                not_applied: list[str] | None = None) -> Rig:
+                not_applied: list[str] | None = None,
+                metadata: dict[str, str] | None = None) -> Rig:
     """A built-in rig by name (``paper3``, ``paper2``), a rig file (pslog's TOML, or an
     aniposelib / Pose2Sim / OpenCV calibration: :func:`load_rig`), or a session file (an
     MCAP file: the rig it was recorded, synced or corrected with).
@@ -239,6 +240,9 @@ def resolve_rig(name_or_path: str | Path, timing_from: Rig | None = None,
     ``not_applied``: a list that receives the names of the cameras whose timing keys the
     calibration file holds (a pslog-exported one: ``fps`` and ``offset`` on every camera)
     and ``timing_from``'s replaced with other values (``pslog fuse --rig`` says so).
+
+    ``metadata``: a dict that receives a session file's metadata (e.g. the covariance of the
+    clocks ``pslog sync`` estimated, which ``pslog fuse --rig`` takes with the clocks).
     """
     if str(name_or_path) in BUILTIN_RIGS:
         return builtin_rig(str(name_or_path))
@@ -253,7 +257,10 @@ def resolve_rig(name_or_path: str | Path, timing_from: Rig | None = None,
     if _is_session_file(path):  # a session's rig (e.g. a synced one's), as `pslog rig show`
         from .log import read_session
 
-        return read_session(path).rig
+        session = read_session(path)
+        if metadata is not None:
+            metadata.update(session.metadata or {})
+        return session.rig
     loaded = load_rig_file(path)
     if timing_from is None or loaded.format == "pslog":
         return loaded.rig

@@ -136,6 +136,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from dataclasses import replace
+
     import numpy as np
 
     from pslog import progress
@@ -156,15 +158,18 @@ def run(args: argparse.Namespace) -> int:
     from pslog.log import read_session
     from pslog.log.copy import open_copy
     from pslog.rig import check_baselines, resolve_rig
+    from pslog.timing import CLOCK_STD_KEY, read_clock_covariance
     from pslog.timing import observations as timed_observations
 
     output = args.output  # checked before run() (declare_files)
     progress.update(what="reading the session")
     session = read_session(args.session)
     rig = session.rig
+    rig_metadata: dict[str, str] = {}  # (--rig a session file: its metadata, clocks' covariance)
     if args.rig is not None:
         unused: list[str] = []  # (a calibration's cameras whose timing keys it replaced)
-        rig = resolve_rig(args.rig, timing_from=session.rig, not_applied=unused)
+        rig = resolve_rig(args.rig, timing_from=session.rig, not_applied=unused,
+                          metadata=rig_metadata)
         if rig.names != session.rig.names:
             raise RigError(f"{args.rig}: cameras {', '.join(rig.names)} differ from the "
                            f"session's {', '.join(session.rig.names)} (names and order must "
@@ -194,11 +199,18 @@ def run(args: argparse.Namespace) -> int:
                             detector_offset_m=None if args.detector_offset_mm is None
                             else args.detector_offset_mm / 1e3,
                             detector_bias_px=args.detector_bias_px)
-    # the detector's default offset, and the synced clocks' covariance
+    # the detector's default offset, and the synced clocks' covariance: a --rig session
+    # file's clocks (a synced copy's) come with the covariance its sync stored, which the
+    # input session does not hold (hostile38: std_m without it, silently)
+    rig_clock = (read_clock_covariance(rig, rig_metadata)
+                 if args.clock_uncertainty != "off" and CLOCK_STD_KEY in rig_metadata else None)
+    from_rig = rig_clock is not None
+    if from_rig:
+        options = replace(options, clock_covariance=rig_clock)
     options = for_session(options, session.metadata,
                           rig if args.clock_uncertainty != "off" else None)
     if args.clock_uncertainty != "off":
-        _say_clock_uncertainty(args, session, options.clock_covariance)
+        _say_clock_uncertainty(args, session, options.clock_covariance, from_rig)
     observations = timed_observations(session.detections, rig)  # the rig's clock model
     if len(observations) == 0:
         raise FusionError(f"{args.session} has no detection to fuse")
@@ -451,12 +463,14 @@ def _still_rejections(rejected) -> int:
     return count
 
 
-def _say_clock_uncertainty(args: argparse.Namespace, session, applied) -> None:
+def _say_clock_uncertainty(args: argparse.Namespace, session, applied,
+                           from_rig: bool = False) -> None:
     """One line on whether every point's ``std_m`` holds the clocks' uncertainty: the count of
     estimates it holds, or why it holds none where a user could expect them (asked for on a
     session never synced; every synced clock replaced by ``--rig``; the session's
     ``clock_std`` metadata damaged). A fuse never stops for it: the clocks' part is
-    informative, and without it ``std_m`` is the pixel noise's, as with ``off``."""
+    informative, and without it ``std_m`` is the pixel noise's, as with ``off``.
+    ``from_rig``: ``applied`` is the ``--rig`` session file's (its sync's estimates)."""
     import numpy as np
 
     from pslog.timing import CLOCK_STD_KEY, read_clock_covariance, read_clock_std
@@ -468,7 +482,7 @@ def _say_clock_uncertainty(args: argparse.Namespace, session, applied) -> None:
         stds is not None and sum(not v >= 0 for row in stds for v in row.values()))
     fix = "run 'pslog sync' again to restore it"
     if applied is not None:
-        replaced = 0 if synced is None else len(synced) - len(applied)
+        replaced = 0 if synced is None or from_rig else len(synced) - len(applied)
         names = session.rig.names  # (which ones: a user knows the cameras, not a count)
         # (a readout pslog sync estimated once per camera model, tied: its cameras' rows of
         # the covariance are one, T Σ Tᵀ; said as one estimate, as sync says it; walk38: the
@@ -493,7 +507,8 @@ def _say_clock_uncertainty(args: argparse.Namespace, session, applied) -> None:
             for p, label in enumerate(("offset", "drift", "readout"))
             if np.any(applied.parameter == p))
         print(f"std_m includes the uncertainty of the {len(groups)} clock estimates of "
-              f"pslog sync ({which}; --clock-uncertainty off: the pixel noise alone)"
+              + (f"the pslog sync of --rig {args.rig}" if from_rig else "pslog sync")
+              + f" ({which}; --clock-uncertainty off: the pixel noise alone)"
               + (f"; --rig {args.rig} replaced {replaced} other"
                  + ("s: none for them" if replaced > 1 else ": none for it")
                  if replaced > 0 else "")
