@@ -486,7 +486,8 @@ def select_clocks(obs: Observations, rig: Rig, search_s: float | None = None,
         # tied readouts: the model chosen fitted from the wide fit's converged clocks (its
         # offsets, readouts and drifts kept; no coarse scan: the tie decision has that fit,
         # session 38: the second fit's CPU 0.39-0.49 -> 0.13-0.24 s on paper3 at 8 s, the
-        # clocks within the rounds' own tolerance of the cold fit's, at most 0.19 σ); a
+        # clocks within 0.19 σ of the cold fit's: not the rounds' tolerance alone, two
+        # fixed points of the rounds on one seed, docs/timing.md); a
         # group dropped: from the rig, as --estimate names it (the same result to the bit;
         # a warm start saved 5-20 % there). The wide fit's rig (its readouts put in [0, frame
         # period) as a rig holds them): a camera's readout estimated beyond its frame period
