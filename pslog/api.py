@@ -251,7 +251,13 @@ def sync(session: Session | str | os.PathLike[str],
     pslog.errors.FusionError : no detection, or the estimate failed (with the likely cause)
     """
     from . import progress
-    from .estimation.sync import PARAMETERS, SHARED_READOUT, estimate_clocks
+    from .estimation.sync import (
+        AUTO_DRIFT_MIN_S,
+        PARAMETERS,
+        RIG_KEY,
+        SHARED_READOUT,
+        estimate_clocks,
+    )
     from .rig import check_baselines
     from .timing import (
         REGULARIZE_AUTO_JITTER_S,
@@ -278,7 +284,16 @@ def sync(session: Session | str | os.PathLike[str],
         raise InputError(f"regularize {regularize!r}: auto, on or off")
     # a synced copy synced again: from the clock model recorded before its first sync (its
     # estimates are this data's, not known values: docs/timing.md, "Syncing a synced copy")
-    rig, resynced = recorded_clocks(read.rig, read.metadata)
+    # (only the parameters this sync estimates, or auto tests: one it does not keeps the
+    # copy's value, as --estimate says)
+    if estimate == ["auto"]:
+        times = read.detections.frame_time_ns
+        span = float(times.max() - times.min()) / 1e9 if len(times) else 0.0
+        names = ["offset", "readout", *(["drift"] if span >= AUTO_DRIFT_MIN_S else [])]
+    else:
+        names = ["readout" if p == SHARED_READOUT else p for p in estimate]
+    rig, resynced = recorded_clocks(read.rig, read.metadata,
+                                    tuple(RIG_KEY[p] for p in PARAMETERS if p in names))
     check_baselines(rig, str(read.path))
     detections = read.detections
     notes: list[str] = []

@@ -241,13 +241,17 @@ def clock_std_json(rig: Rig, stds, estimated=None, selection=None,
     return json.dumps(value)
 
 
-def recorded_clocks(rig: Rig, metadata) -> tuple[Rig, bool]:
+def recorded_clocks(rig: Rig, metadata,
+                    keys: tuple[str, ...] = CLOCK_KEYS) -> tuple[Rig, bool]:
     """``rig`` with the clock model it had before ``pslog sync`` estimated it: each clock
-    parameter whose value is still the one a sync stored (:data:`CLOCK_STD_KEY`) takes the
-    value that sync started from (its ``prior``, written since session 38, carried from sync
-    to sync); a value changed since (a rig edited by hand) stays. And whether any was
-    replaced. ``rig`` itself (False) for a session never synced, synced before session 38,
-    or whose metadata is malformed (it is informative only).
+    parameter among ``keys`` (of :data:`CLOCK_KEYS`: those the new sync estimates, or tests)
+    whose value is still the one a sync stored (:data:`CLOCK_STD_KEY`) takes the value that
+    sync started from (its ``prior``, written since session 38, carried from sync to sync);
+    a value changed since (a rig edited by hand) stays, and so does one the new sync does not
+    estimate (``--estimate readout`` of a copy synced for its offsets keeps those offsets:
+    put back, they were lost, the readouts fitted at offsets 0; session 38's review). And
+    whether any was replaced. ``rig`` itself (False) for a session never synced, synced
+    before session 38, or whose metadata is malformed (it is informative only).
 
     A synced copy synced again starts here: the first sync's estimates are the same data's,
     so holding them as the rig's known values (tested against, kept exact where a test does
@@ -265,7 +269,7 @@ def recorded_clocks(rig: Rig, metadata) -> tuple[Rig, bool]:
         new, changed = [], False
         for cam in rig.cameras:
             values = {}
-            for key in CLOCK_KEYS:
+            for key in keys:
                 held = cams.get(cam.name, {}).get(key)
                 if held is not None and float(held[0]) == getattr(cam, key) \
                         and cam.name in prior:

@@ -33,12 +33,13 @@ from pslog.rig import apply_timing, builtin_rig
 from pslog.simulation import SimulationOptions, ball_mask, simulate_labelled
 
 
-def _straight(timing: str = "typeA"):
+def _straight(timing: str = "typeA", seed: int = 51904):
     """bench_dirty's ``--more --first-seed 52200`` ``paper3`` ``straight`` with its faults
-    (at ``timing``: the case is typeA's): the rig, the detections, their ball mask."""
+    (at ``timing``: the case is typeA's; ``seed`` 51904 the case, others its neighbours):
+    the rig, the detections, their ball mask."""
     rig = apply_timing(builtin_rig("paper3"), timing)
     motion = get_motion("straight")
-    options = SimulationOptions(noise_px=0.3, seed=51904, spurious_rate=0.05,
+    options = SimulationOptions(noise_px=0.3, seed=seed, spurious_rate=0.05,
                                 distractors=(("cam2", DISTRACTOR),),
                                 blackouts=(("cam3", 0.25 * motion.duration + 0.4, 0.5),))
     det, _truth, ball = simulate_labelled(rig, motion, None, options)
@@ -146,6 +147,36 @@ def test_the_dirty_rallys_stream_gates_are_the_batch_gates():
     g = gate(det, rig, causal=True)
     assert np.count_nonzero(~g.chosen) >= 20
     _same_in_the_stream(rig, det, g)
+
+
+@pytest.mark.parametrize("seed", [51902, 51907])
+def test_each_gate_reads_the_held_flags_of_the_frames_it_compares(seed):
+    """The held flags come from the very earlier frames whose pixels the image test compares
+    (lag 1 .. static_s fps back): on these neighbours of the case the flags change from
+    frame to frame where the count decides (held in all but one of the frames, or one
+    fewer), so a form reading its neighbour frame's flags (an off-by-one: the compiled
+    stream gate's ``cf[a, h + 1, q, 8]``, found in review) decides otherwise there. The
+    stream gates (Python and compiled) are the causal gate, and _static's numpy and
+    compiled forms agree, offline and causal."""
+    rig, det, _ = _straight(seed=seed)
+    _same_in_the_stream(rig, det, gate(det, rig, causal=True))
+    c, tables = gating.gate_common(det, rig)
+    F = fundamental_matrices(rig.cameras)
+    options = GatingOptions()
+    constants = gating._rig_constants(rig)
+    for causal in (True, False):
+        ratio, carried, _ = gating._support(c, rig, F, tables, options, round(3.5e9 / 30),
+                                            causal, 0)
+        points, _, miss = gating._points(c, rig, ratio, carried, constants)
+        points[miss > options.track_m] = np.nan
+        held = gating._held(c, rig, ratio, carried, points, miss, options, constants)
+        assert np.count_nonzero(held & ~np.isfinite(points).all(axis=1)) >= 1
+        want = gating._static(c, tables, rig, options, points, gating._paired(ratio),
+                              compiled=False, held=held)
+        got = gating._static(c, tables, rig, options, points, gating._paired(ratio),
+                             compiled=True, held=held)
+        for w, g in zip(want, got, strict=True):
+            assert_array_equal(w.view(np.uint8), g.view(np.uint8))
 
 
 def test_held_is_one_support_whose_ray_meets_where_two_miss():

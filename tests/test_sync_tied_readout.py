@@ -210,3 +210,24 @@ def test_auto_fits_the_tied_model_from_its_wide_fit(tmp_path, cli, monkeypatch):
     scans.clear()
     assert sync(read_session(path), "offset,readout=shared").result.shared_readout
     assert len(scans) == 1  # (a fit of its own scans, as before)
+
+
+def test_auto_ties_readouts_whose_wide_estimates_pass_the_frame_period(tmp_path, cli):
+    """A full-frame rolling shutter (32 ms at 30 fps, the frame period 33.3 ms): the wide
+    fit's per-camera readouts scatter by about 2 ms around it (seed 38231: cam1 33.72 ms,
+    beyond the period), the tied refit starts from that fit's clocks, and a start holding
+    33.72 ms was a rig a rig refuses: auto failed ("RigError: camera 'cam1': readout
+    0.03372 s must be in [0, 0.0333333 s)"; found in session 38's review). It starts from
+    the wide fit's rig (its readouts in [0, period) as the rig it writes), and the tied fit
+    lands near the truth."""
+    from pslog.api import sync
+
+    path = tmp_path / "full_frame.mcap"
+    _simulate(cli, path, 38231, "32")
+    result = sync(read_session(path), "auto").result
+    assert result.shared_readout and "readout" in result.estimated
+    readouts = [c.readout_s for c in result.cameras]
+    assert len(set(readouts)) == 1  # (one readout for the three cameras of one model)
+    assert abs(readouts[0] - 0.032) < 3 * result.cameras[0].readout_std_s
+    assert 0.0 <= min(c.readout for c in result.rig.cameras)
+    assert max(c.readout for c in result.rig.cameras) < 1 / 30

@@ -105,3 +105,25 @@ def test_a_copy_synced_without_its_prior_says_what_it_holds(tmp_path):
            "from" in out, out
     assert "synced before: estimated again" not in out
     assert "synced before" not in _pslog("sync", raw, "-o", tmp_path / "fresh.mcap")
+
+
+def test_a_parameter_the_new_sync_does_not_estimate_keeps_the_copys_value(tmp_path):
+    """A copy synced for its offsets, synced again for its readouts alone (``--estimate
+    readout``): the offsets are not estimated, so they stay the copy's (the first sync's),
+    as the table says ("kept at the rig's values"), and the readouts are fitted at them.
+    Found in session 38's review: every value the first sync stored was put back to its
+    ``prior``, the offsets too — the copy's 4.562 / -7.143 ms became 0 / 0 in silence and
+    the readouts absorbed them (9.1 / 16.6 / -1.9 ms, cam3's clipped to 0; the truth 12)."""
+    raw = tmp_path / "raw.mcap"
+    _pslog("simulate", "--rig", "paper3", "--timing", "typeA", "--motion", "rally",
+           "--duration", "8", "--noise-px", "0.3", "--clock-offset", "cam2=5",
+           "--clock-offset", "cam3=-7", "--readout", "12", "--seed", 38101, "-o", raw)
+    once, twice = tmp_path / "once.mcap", tmp_path / "twice.mcap"
+    _pslog("sync", raw, "-o", once, "--estimate", "offset")
+    out = _pslog("sync", once, "-o", twice, "--estimate", "readout")
+    assert "synced before" not in out  # (nothing put back: the readouts were the prior's)
+    offsets = [c.clock_offset for c in read_session(once).rig.cameras]
+    assert abs(offsets[1] - 0.005) < 0.002 and abs(offsets[2] + 0.007) < 0.002
+    synced = read_session(twice).rig.cameras
+    assert [c.clock_offset for c in synced] == offsets
+    assert all(0.004 < c.readout < 0.020 for c in synced), [c.readout for c in synced]

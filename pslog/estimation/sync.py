@@ -491,13 +491,14 @@ def select_clocks(obs: Observations, rig: Rig, search_s: float | None = None,
         # tied readouts: the model chosen fitted from the wide fit's converged clocks (its
         # offsets, readouts and drifts kept; no coarse scan: the tie decision has that fit,
         # session 38: the second fit's CPU 0.39-0.49 -> 0.13-0.24 s on paper3 at 8 s, the
-        # clocks within the rounds' own tolerance of the cold fit's, at most 0.19 σ); a
+        # clocks within 0.19 σ of the cold fit's: not the rounds' tolerance alone, two
+        # fixed points of the rounds on one seed, docs/timing.md); a
         # group dropped: from the rig, as --estimate names it (the same result to the bit;
-        # a warm start saved 5-20 % there)
-        start = None if full is None or not tied else Rig(tuple(
-            cam.replace(**{RIG_KEY[p]: getattr(full.cameras[c], _FIELD[p]) for p in chosen
-                           if p in full.estimated})
-            for c, cam in enumerate(rig.cameras)), rig.name)
+        # a warm start saved 5-20 % there). The wide fit's rig (its readouts put in [0, frame
+        # period) as a rig holds them): a camera's readout estimated beyond its frame period
+        # (a full-frame rolling shutter, 32 ms at 30 fps) or below 0 made the start a rig
+        # refused, and auto failed (RigError, session 38's review)
+        start = None if full is None or not tied else full.rig
         result = estimate_clocks(obs, rig, tuple(SHARED_READOUT if tied and p == "readout"
                                                  else p for p in chosen),
                                  search_s, options, regularized, start)
