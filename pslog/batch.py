@@ -36,6 +36,7 @@ from pathlib import Path
 from typing import Any
 
 from pslog.errors import InputError, PslogError, shell_word
+from pslog.records import by_reason
 
 #: every step, in the order a session goes through them
 STEPS = ("redetect", "sync", "fuse", "eval", "view")
@@ -841,7 +842,7 @@ def left_out_columns(method: str, left_out: dict[str, int]) -> dict:
     ``<method>_left_out``, their total, and ``<method>_left_out_reasons``, the counts by
     reason in ``pslog fuse``'s words (``"contradicted 3, unconfirmed 2"``; empty: none)."""
     return {f"{method}_left_out": int(sum(left_out.values())),
-            f"{method}_left_out_reasons": ", ".join(f"{r} {n}" for r, n in left_out.items())}
+            f"{method}_left_out_reasons": by_reason(left_out)}
 
 
 # --------------------------------------------------------------------------- the summary

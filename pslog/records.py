@@ -348,6 +348,13 @@ class Track:
                    np.concatenate([p.camera for p in full]), quality, dropped=dropped)
 
 
+def by_reason(counts: Mapping[str, int]) -> str:
+    """``{reason: count}`` (e.g. ``Track.dropped``, the gate's rejections) in the commands'
+    words: ``"contradicted 3, unconfirmed 2"``, in the mapping's order, zero counts left out;
+    empty when there is none."""
+    return ", ".join(f"{reason} {n}" for reason, n in counts.items() if n)
+
+
 def point_keys(time_ns: np.ndarray, camera: np.ndarray) -> np.ndarray:
     """(n,) int64: each point's (or detection's) time and camera keyed as one integer
     (times < 2**55 ns, cameras < 256)."""

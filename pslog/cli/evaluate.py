@@ -37,6 +37,7 @@ def run(args: argparse.Namespace) -> int:
         unscored_counts,
     )
     from pslog.log import read_session
+    from pslog.records import by_reason
 
     progress.update(total=2, what="reading the session")
     session = read_session(args.session)
@@ -113,8 +114,8 @@ def run(args: argparse.Namespace) -> int:
                   + (", and points written but not scored" * any(unscored.values()))
                   + ", by reason:")
             for m in shown:
-                left = ", ".join(f"{r} {n}" for r, n in left_out.get(m, {}).items())
-                skipped = ", ".join(f"{r} {n}" for r, n in unscored[m].items())
+                left = by_reason(left_out.get(m, {}))
+                skipped = by_reason(unscored[m])
                 print(f"{m:<9} " + "; ".join(
                     [left] * bool(left) + [f"not scored: {skipped}"] * bool(skipped)))
             texts = {**LEFT_OUT_TEXT, **NOT_SCORED_TEXT}

@@ -157,6 +157,7 @@ def run(args: argparse.Namespace) -> int:
     from pslog.fusion.gating import start_fusion
     from pslog.log import read_session
     from pslog.log.copy import open_copy
+    from pslog.records import by_reason
     from pslog.rig import check_baselines, resolve_rig
     from pslog.timing import CLOCK_STD_KEY, read_clock_covariance
     from pslog.timing import observations as timed_observations
@@ -334,7 +335,7 @@ def run(args: argparse.Namespace) -> int:
         raise
     for method in (m for m in methods if m in written):
         n_points, dropped, n_rejected, n_flagged, n_backward = written[method]
-        why = ", ".join(f"{reason} {n}" for reason, n in dropped.items())
+        why = by_reason(dropped)
         rejected_text = (f"  {n_rejected:>6d} candidate{'' if n_rejected == 1 else 's'} "
                          "rejected by gating" if options.gating else "")
         what = {"smooth": "fit", "filter": "gate"}.get(method, "method")
@@ -373,9 +374,11 @@ def _no_point(method: str, dropped: dict[str, int], max_std_mm: float | None,
     candidates the gating rejected (``rejected``: count by reason) said with it: they may be
     the detections a point lacked ("too few detections close enough in time" alone, when
     the gating had rejected them, sent a user to the clocks)."""
+    from pslog.records import by_reason
+
     n = sum((rejected or {}).values())
     gated = (f"the gating rejected {n} candidate{'s' if n > 1 else ''} ("
-             + ", ".join(f"{r} {k}" for r, k in (rejected or {}).items() if k)
+             + by_reason(rejected or {})
              + "; --gating off: each frame's best-scored candidate)" if n else "")
     if not dropped:
         return (f"no point from {method}: too few detections close enough in time"
@@ -384,7 +387,7 @@ def _no_point(method: str, dropped: dict[str, int], max_std_mm: float | None,
     if set(dropped) == {"uncertain"} and max_std_mm is not None:
         return (f"no point from {method}: all {total} {method} points withheld: std above "
                 f"--type-a-max-std-mm {max_std_mm:g} mm")
-    why = ", ".join(f"{reason} {n}" for reason, n in dropped.items())
+    why = by_reason(dropped)
     bound = (f"; uncertain: std above --type-a-max-std-mm {max_std_mm:g} mm"
              if "uncertain" in dropped and max_std_mm is not None else "")
     return (f"no point from {method}: all {total} points left out, untrustworthy: "
