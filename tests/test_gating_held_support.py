@@ -83,12 +83,11 @@ def test_a_ball_along_its_ray_whose_second_support_misses_stays_the_ball(causal)
         _same_in_the_stream(rig, det, g)
 
 
-def test_held_counts_a_frame_whose_second_support_misses_but_one_alone_makes_a_point():
-    """_held on the session: more than the points (the frames of the case), only where two
-    or more supports' rays missed and one support's ray meets the candidate's; its float
-    form (_held_one, the stream's) gives the same flags; _static's compiled and numpy forms
-    take it alike, and it turns cam1's ball from lone to not lone there."""
-    rig, det, _ = _straight()
+def _held_flags(rig, det):
+    """Per gate form (causal, then offline): the gate's candidates and tables, its options
+    and constants, the candidates' support (``ratio``, ``carried``), their points (NaN
+    where the rays miss by more than ``track_m``), ``miss`` and the held flags
+    (``gating._held``), as ``gating._decided`` makes them."""
     c, tables = gating.gate_common(det, rig)
     F = fundamental_matrices(rig.cameras)
     options = GatingOptions()
@@ -99,6 +98,17 @@ def test_held_counts_a_frame_whose_second_support_misses_but_one_alone_makes_a_p
         points, _, miss = gating._points(c, rig, ratio, carried, constants)
         points[miss > options.track_m] = np.nan
         held = gating._held(c, rig, ratio, carried, points, miss, options, constants)
+        yield causal, c, tables, options, constants, ratio, carried, points, miss, held
+
+
+def test_held_counts_a_frame_whose_second_support_misses_but_one_alone_makes_a_point():
+    """_held on the session: more than the points (the frames of the case), only where two
+    or more supports' rays missed and one support's ray meets the candidate's; its float
+    form (_held_one, the stream's) gives the same flags; _static's compiled and numpy forms
+    take it alike, and it turns cam1's ball from lone to not lone there."""
+    rig, det, _ = _straight()
+    for causal, c, tables, options, constants, ratio, carried, points, miss, held in (
+            _held_flags(rig, det)):
         finite = np.isfinite(points).all(axis=1)
         extra = held & ~finite
         assert np.all(held[finite])
@@ -160,16 +170,8 @@ def test_each_gate_reads_the_held_flags_of_the_frames_it_compares(seed):
     compiled forms agree, offline and causal."""
     rig, det, _ = _straight(seed=seed)
     _same_in_the_stream(rig, det, gate(det, rig, causal=True))
-    c, tables = gating.gate_common(det, rig)
-    F = fundamental_matrices(rig.cameras)
-    options = GatingOptions()
-    constants = gating._rig_constants(rig)
-    for causal in (True, False):
-        ratio, carried, _ = gating._support(c, rig, F, tables, options, round(3.5e9 / 30),
-                                            causal, 0)
-        points, _, miss = gating._points(c, rig, ratio, carried, constants)
-        points[miss > options.track_m] = np.nan
-        held = gating._held(c, rig, ratio, carried, points, miss, options, constants)
+    for _causal, c, tables, options, _constants, ratio, _carried, points, _miss, held in (
+            _held_flags(rig, det)):
         assert np.count_nonzero(held & ~np.isfinite(points).all(axis=1)) >= 1
         want = gating._static(c, tables, rig, options, points, gating._paired(ratio),
                               compiled=False, held=held)
