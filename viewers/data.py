@@ -449,14 +449,22 @@ def load_view_data(session_paths: str | Path | Sequence[str | Path], *,
 def rejected_candidates(detections: Detections, rejections) -> np.ndarray:
     """(C,) bool over ``detections``' candidates: those ``rejections`` (a
     :class:`pslog.fusion.gating.Rejections` stored with a track) holds, by camera, frame
-    and pixel."""
-    keys = set(zip(rejections.camera.tolist(), rejections.frame_index.tolist(),
-                   rejections.uv[:, 0].tolist(), rejections.uv[:, 1].tolist(), strict=True))
+    and pixel (the same float values: the gate stores the candidate's pixel)."""
     rows = detections.cand_frame
-    return np.array([k in keys for k in zip(
-        detections.frame_camera[rows].tolist(), detections.frame_index[rows].tolist(),
-        detections.cand_uv[:, 0].tolist(), detections.cand_uv[:, 1].tolist(), strict=True)],
-        dtype=bool)
+    held = _candidate_keys(rejections.camera, rejections.frame_index, rejections.uv)
+    return np.isin(_candidate_keys(detections.frame_camera[rows],
+                                   detections.frame_index[rows], detections.cand_uv), held)
+
+
+def _candidate_keys(camera: np.ndarray, frame_index: np.ndarray, uv: np.ndarray
+                    ) -> np.ndarray:
+    """(n,) opaque keys, equal where (camera, frame index, u, v) are: each row's four values
+    as 32 bytes (``uv + 0.0``: -0.0 and 0.0 one key, as they compare equal)."""
+    packed = np.empty(len(camera), dtype=[("c", "<i8"), ("f", "<i8"), ("u", "<f8"),
+                                          ("v", "<f8")])
+    packed["c"], packed["f"] = camera, frame_index
+    packed["u"], packed["v"] = uv[:, 0] + 0.0, uv[:, 1] + 0.0
+    return packed.view("V32")
 
 
 def chosen_observations(session: Session, rejections) -> Observations:
