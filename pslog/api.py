@@ -206,7 +206,10 @@ class SyncOutcome:
     notes : what was done that a user should know (regularized stamps, rejected candidates)
     prior : the rig whose clock model the estimate started from and tested against: the
         session's, or, for a copy synced before, the one recorded before its first sync
-        (:func:`pslog.timing.recorded_clocks`); None: the session's rig
+        (:func:`pslog.timing.recorded_clocks`)
+    prior_estimated : whether ``prior`` holds clock estimates of an earlier sync that did
+        not record its own starting model (a pslog before session 38), as known values: said
+        in ``notes`` and recorded with the copy, so that every later sync says it too
     """
 
     rig: Rig
@@ -216,6 +219,7 @@ class SyncOutcome:
     regularized: dict = field(default_factory=dict)
     notes: tuple[str, ...] = ()
     prior: Rig | None = None
+    prior_estimated: bool = False
 
 
 def sync(session: Session | str | os.PathLike[str],
@@ -297,15 +301,16 @@ def sync(session: Session | str | os.PathLike[str],
     check_baselines(rig, str(read.path))
     detections = read.detections
     notes: list[str] = []
-    if resynced:
-        notes.append("synced before: estimated again from the clock model recorded before "
-                     "its first sync (that sync's estimates are this data's, not known "
-                     "values)")
-    elif _synced_without_prior(read.metadata):
+    prior_estimated = _prior_estimated(read.metadata)
+    if prior_estimated:  # (a copy of an older pslog's, or synced from one since: each time)
         notes.append("synced before by a pslog that did not record the clock model it "
                      "started from (before session 38): the copy's clock estimates are "
                      "taken as the rig's values, those not estimated again kept without "
                      "their uncertainty; sync the original session to estimate them again")
+    elif resynced:
+        notes.append("synced before: estimated again from the clock model recorded before "
+                     "its first sync (that sync's estimates are this data's, not known "
+                     "values)")
     reports: dict = {}
     if regularize != "off":
         progress.step("checking host timestamps")
@@ -346,20 +351,24 @@ def sync(session: Session | str | os.PathLike[str],
         raise FusionError(f"{exc}; note: {several} of {detections.n_frames} frames hold "
                           f"several candidates and a false one the gating kept (a "
                           f"reflection, a second ball) may be the cause") from None
-    return SyncOutcome(result.rig, result, detections, obs, reports, tuple(notes), rig)
+    return SyncOutcome(result.rig, result, detections, obs, reports, tuple(notes), rig,
+                       prior_estimated)
 
 
-def _synced_without_prior(metadata) -> bool:
-    """Whether the session is a copy ``pslog sync`` wrote before it recorded the clock model
-    it started from (a ``clock_std`` with estimates and no ``prior``:
-    :func:`pslog.timing.recorded_clocks` cannot put that model back)."""
+def _prior_estimated(metadata) -> bool:
+    """Whether the session's clock model before any sync is lost: a copy ``pslog sync``
+    wrote before it recorded the model it started from (a ``clock_std`` with estimates and
+    no ``prior``: :func:`pslog.timing.recorded_clocks` cannot put it back), or one synced
+    since from such a copy (its ``prior`` holds that older sync's estimates:
+    ``prior_estimated``)."""
     import json
 
     from .timing import CLOCK_STD_KEY
 
     try:
         stored = json.loads(metadata.get(CLOCK_STD_KEY) or "{}")
-        return bool(stored.get("estimated")) and "prior" not in stored
+        return bool(stored.get("estimated")) and (
+            "prior" not in stored or bool(stored.get("prior_estimated")))
     except (ValueError, AttributeError):
         return False
 

@@ -210,7 +210,8 @@ CLOCK_KEYS = ("clock_offset", "clock_drift_ppm", "readout")
 
 
 def clock_std_json(rig: Rig, stds, estimated=None, selection=None,
-                   covariance: ClockCovariance | None = None, prior: Rig | None = None) -> str:
+                   covariance: ClockCovariance | None = None, prior: Rig | None = None,
+                   prior_estimated: bool = False) -> str:
     """The :data:`CLOCK_STD_KEY` value for ``rig`` (holding the estimates) and ``stds``, one
     ``(offset_std_s, drift_std_ppm, readout_std_s)`` per camera in rig order; with
     ``estimated`` (the parameters estimated), ``selection`` (``--estimate auto``: its
@@ -218,7 +219,8 @@ def clock_std_json(rig: Rig, stds, estimated=None, selection=None,
     :class:`ClockCovariance`: the estimates' joint covariance,
     :meth:`pslog.estimation.sync.SyncResult.clock_covariance`) and ``prior`` (the rig whose
     clock model the sync started from and tested against: the recorded one,
-    :func:`recorded_clocks`) those too."""
+    :func:`recorded_clocks`) those too; ``prior_estimated``: that model holds an older sync's
+    estimates (``pslog.api.SyncOutcome.prior_estimated``), recorded so later syncs say it."""
     import json
 
     value: dict = {"cameras": {
@@ -232,6 +234,8 @@ def clock_std_json(rig: Rig, stds, estimated=None, selection=None,
     if prior is not None:
         value["prior"] = {cam.name: {key: float(getattr(cam, key)) for key in CLOCK_KEYS}
                           for cam in prior.cameras}
+        if prior_estimated:
+            value["prior_estimated"] = True
     if covariance is not None:
         value["covariance"] = {
             "parameters": [[rig.cameras[c].name, CLOCK_KEYS[p]]

@@ -107,7 +107,15 @@ def test_a_copy_synced_without_its_prior_says_what_it_holds(tmp_path):
     assert "synced before by a pslog that did not record the clock model it started " \
            "from" in out, out
     assert "synced before: estimated again" not in out
+    # and every later sync of it says so again: its recorded model is that copy's estimates
+    # (recorded with the copy: review38 found the second sync silent)
+    assert json.loads(read_session(tmp_path / "again.mcap").metadata["clock_std"])[
+        "prior_estimated"] is True
+    out = _pslog("sync", tmp_path / "again.mcap", "-o", tmp_path / "thrice.mcap")
+    assert "synced before by a pslog that did not record the clock model it started " \
+           "from" in out, out
     assert "synced before" not in _pslog("sync", raw, "-o", tmp_path / "fresh.mcap")
+    assert "prior_estimated" not in read_session(tmp_path / "fresh.mcap").metadata["clock_std"]
 
 
 def test_a_parameter_the_new_sync_does_not_estimate_keeps_the_copys_value(tmp_path):

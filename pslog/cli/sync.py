@@ -91,7 +91,7 @@ def run(args: argparse.Namespace) -> int:
                  detections=outcome.detections if outcome.regularized else None,
                  metadata={CLOCK_STD_KEY: clock_std_json(
                      result.rig, stds, estimated, selection, result.clock_covariance(),
-                     prior=outcome.prior)})
+                     prior=outcome.prior, prior_estimated=outcome.prior_estimated)})
     if args.json:
         # standard output is one JSON document (pslog batch parses it): the notes, what a
         # user should know of the run, on stderr (they were dropped: session 33)
