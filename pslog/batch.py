@@ -1076,6 +1076,7 @@ def ray_cluster(workers: int | None, address: str | None):
         yield int(ray.cluster_resources().get("CPU", 1))
         return
     temp = None
+    watchdog = None  # (the local cluster's: ends what a killed batch leaves, _start_watchdog)
     quiet: dict[str, Any] = {"logging_level": logging.ERROR, "log_to_driver": False,
                              "include_dashboard": False}
     native = io.StringIO()  # what Ray's C++ core wrote while joining a cluster
@@ -1095,9 +1096,10 @@ def ray_cluster(workers: int | None, address: str | None):
             else:
                 # a short private folder: Ray's socket paths must fit in 107 bytes
                 temp = tempfile.mkdtemp(prefix="pslog-ray-")
+                watchdog = _start_watchdog(temp)
                 ray.init(num_cpus=workers or os.cpu_count() or 1, _temp_dir=temp, **quiet)
     except Exception as exc:
-        _shutdown(ray, temp, handlers)
+        _shutdown(ray, temp, handlers, watchdog)
         where = f"the Ray cluster at {address}" if address else "a local Ray cluster"
         reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         if "InvalidAuthToken" in native.getvalue() or "Unauthenticated" in native.getvalue():
@@ -1106,7 +1108,7 @@ def ray_cluster(workers: int | None, address: str | None):
                       "docs/batch.md)")
         raise PslogError(f"cannot start or join {where}: {reason}") from None
     except SystemExit as exc:  # ray.init's own SIGTERM handler: sys.exit(15), no word
-        _shutdown(ray, temp, handlers)
+        _shutdown(ray, temp, handlers, watchdog)
         import signal
 
         if exc.code == signal.SIGTERM:
@@ -1115,13 +1117,13 @@ def ray_cluster(workers: int | None, address: str | None):
             raise Terminated(signal.SIGTERM) from None
         raise
     except BaseException:  # Ctrl-C or SIGTERM as the cluster started: none left behind
-        _shutdown(ray, temp, handlers)
+        _shutdown(ray, temp, handlers, watchdog)
         raise
     try:
         _restore(handlers)  # Ray's SIGTERM handler would exit with code 15 and no word
         yield int(ray.cluster_resources().get("CPU", 1))
     finally:
-        _shutdown(ray, temp, handlers)
+        _shutdown(ray, temp, handlers, watchdog)
 
 
 def _signal_handlers() -> dict:
@@ -1142,18 +1144,81 @@ def _restore(handlers: dict) -> None:
             signal.signal(sig, handler)
 
 
-def _shutdown(ray, temp: str | None, handlers: dict) -> None:
+def _shutdown(ray, temp: str | None, handlers: dict, watchdog=None) -> None:
     """The cluster shut down (its local processes ended) and its folder removed, with the
     command's signal handlers back in place of Ray's (whose SIGTERM handler exits with
     code 15 and no word); a Ctrl-C or SIGTERM meanwhile is acted on only once that is
-    done (it would leave Ray's processes running)."""
+    done (it would leave Ray's processes running). ``watchdog``: the local cluster's
+    (:func:`_start_watchdog`), told the batch ended (it then ends what is left)."""
     from pslog.outputs import signals_held
 
     _restore(handlers)
     with signals_held():
         ray.shutdown()
+        if watchdog is not None:
+            with contextlib.suppress(OSError):
+                watchdog.stdin.close()  # (its end of the pipe: it cleans up, then exits)
+            with contextlib.suppress(Exception):
+                watchdog.wait(timeout=10)
         if temp is not None:
             shutil.rmtree(temp, ignore_errors=True)
+
+
+#: The local cluster's watchdog (a process of its own, outside Ray): it waits for the end
+#: of its standard input, which the batch holds open, so it wakes when the batch ends,
+#: however it ends (SIGKILL included), then kills every process but the batch still holding a
+#: file in the cluster's folder (Ray's DashboardAgent and RuntimeEnvAgent outlive a killed driver,
+#: orphaned, 80 MB each: seen in session 38's sweep and CI runs; its GCS server and raylet
+#: die with the driver) and removes the folder. Linux (/proc); elsewhere the folder only.
+_WATCHDOG = """
+import os, shutil, signal, sys, time
+temp, batch = os.path.realpath(sys.argv[1]), int(sys.argv[2])
+sys.stdin.buffer.read()  # until the batch's end of the pipe closes
+def holders():
+    found = set()
+    try:
+        pids = [int(p) for p in os.listdir("/proc") if p.isdigit()]
+    except OSError:
+        return found
+    for pid in pids:
+        if pid in (os.getpid(), batch):  # (a batch that ends normally holds its logs)
+            continue
+        try:
+            for fd in os.listdir(f"/proc/{pid}/fd"):
+                if os.readlink(f"/proc/{pid}/fd/{fd}").startswith(temp + os.sep):
+                    found.add(pid)
+                    break
+        except OSError:
+            pass
+    return found
+for _ in range(3):  # (a process may still be opening its logs as the first pass runs)
+    left = holders()
+    for pid in left:
+        try:
+            os.kill(pid, signal.SIGKILL)
+        except OSError:
+            pass
+    if not left:
+        break
+    time.sleep(0.2)
+shutil.rmtree(temp, ignore_errors=True)
+"""
+
+
+def _start_watchdog(temp: str):
+    """The local cluster's watchdog (:data:`_WATCHDOG`) for its folder ``temp``, started
+    in a session of its own (a Ctrl-C to the batch's process group does not reach it), or
+    None where it cannot start (the batch runs without it: a killed batch may then leave
+    Ray's agents running)."""
+    import subprocess
+
+    try:
+        return subprocess.Popen([sys.executable, "-c", _WATCHDOG, temp, str(os.getpid())],
+                                stdin=subprocess.PIPE, stdout=subprocess.DEVNULL,
+                                stderr=subprocess.DEVNULL, start_new_session=True,
+                                close_fds=True)
+    except OSError:
+        return None
 
 
 def run_batch(jobs: list[Job], settings: Settings, *, workers: int | None = None,

@@ -279,6 +279,55 @@ def short_tmpdir():
         shutil.rmtree(folder, ignore_errors=True)
 
 
+def _holding(folder: str) -> set[int]:
+    """The processes holding a file below ``folder`` open (/proc), this one left out."""
+    found = set()
+    for pid in (int(p) for p in os.listdir("/proc") if p.isdigit() and int(p) != os.getpid()):
+        with contextlib.suppress(OSError):
+            for fd in os.listdir(f"/proc/{pid}/fd"):
+                if os.readlink(f"/proc/{pid}/fd/{fd}").startswith(folder + os.sep):
+                    found.add(pid)
+                    break
+    return found
+
+
+@pytest.mark.skipif(not os.path.isdir("/proc/self/fd"), reason="needs /proc")
+def test_a_killed_batch_leaves_no_ray_process_and_no_folder(tmp_path, short_tmpdir):
+    """SIGKILL to ``pslog batch`` while its local cluster runs: Ray's GCS server and raylet
+    die with it, but its DashboardAgent and RuntimeEnvAgent lived on, orphaned, 80 MB each,
+    for a minute or more, and the cluster's folder stayed (session 38's sweep and CI runs).
+    The batch's watchdog ends every process still holding a file in that folder and removes
+    it, at once."""
+    root = tmp_path / "season"
+    for i in range(3):
+        simulate(root / f"k{i}.mcap", 40 + i, duration=1.0)
+    argv = [sys.executable, "-m", "pslog.cli", "batch", str(root / "*.mcap"), "--do",
+            "sync,fuse,eval", *METHODS, "-o", str(tmp_path / "results"), "--workers", "1"]
+    proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            env={**os.environ, "TMPDIR": short_tmpdir})
+    deadline = time.monotonic() + 120  # a hang guard only
+    folder, agents = None, set()
+    while not agents:  # the cluster up: its agents running, with files in its folder
+        assert proc.poll() is None, "the batch ended before its cluster was seen"
+        assert time.monotonic() < deadline, "no Ray agent seen"
+        time.sleep(0.1)
+        folders = [os.path.join(short_tmpdir, f) for f in os.listdir(short_tmpdir)
+                   if f.startswith("pslog-ray-")]
+        if folders:
+            folder = os.path.realpath(folders[0])
+            agents = {pid for pid in _holding(folder) if b"Agent" in Path(
+                f"/proc/{pid}/cmdline").read_bytes()}
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    deadline = time.monotonic() + 30  # (the watchdog takes well under a second; unwatched,
+    while (left := _holding(folder)) or os.path.exists(folder):  # the agents live 1-2 min)
+        assert time.monotonic() < deadline, (
+            f"left after the kill: {sorted(left)}, folder {os.path.exists(folder)}")
+        time.sleep(0.1)
+    assert not any(os.path.exists(f"/proc/{pid}") and b"Agent" in Path(
+        f"/proc/{pid}/cmdline").read_bytes() for pid in agents)
+
+
 def test_resume_after_a_batch_killed_halfway(tmp_path, short_tmpdir):
     root = tmp_path / "season"
     for i in range(6):
