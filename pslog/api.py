@@ -165,11 +165,13 @@ def fuse(session: Session | str | os.PathLike[str] | Detections,
         detections, used = session, rig
     else:
         read = _session(session)
+        rig_metadata: dict[str, str] = {}  # (a session file's: its sync's clock covariance)
         if isinstance(rig, (str, os.PathLike)):
-            rig = resolve_rig(os.fspath(rig), timing_from=read.rig)  # a calibration: geometry
+            rig = resolve_rig(os.fspath(rig), timing_from=read.rig,  # a calibration: geometry
+                              metadata=rig_metadata)
         detections, used = read.detections, rig or read.rig
         options = for_session(options or FusionOptions(), read.metadata,
-                              used if clock_uncertainty else None)
+                              used if clock_uncertainty else None, rig_metadata)
         if rig is not None and rig.names != read.rig.names:
             from .errors import RigError
 

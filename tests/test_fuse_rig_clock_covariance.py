@@ -40,3 +40,22 @@ def test_fuse_with_a_synced_copys_rig_takes_its_clock_covariance(tmp_path, cli):
         # and the clocks' part is there: without it every std_m is smaller
         std, std_off = by_rig[method].quality["std_m"], off[method].quality["std_m"]
         assert np.all(std >= std_off) and np.mean(std > std_off * 1.001) > 0.5
+
+
+def test_the_api_takes_a_synced_copys_clock_covariance_with_its_rig(tmp_path, cli):
+    """``pslog.fuse(session, rig=SYNCED.mcap)``, the library's form of ``pslog fuse --rig``:
+    the same rule (``for_session``'s ``rig_metadata``), the same std_m as fusing the copy."""
+    import pslog
+
+    session, synced = tmp_path / "s.mcap", tmp_path / "y.mcap"
+    code, _, err = cli("simulate", "--rig", "paper3", "--timing", "typeA", "--motion", "rally",
+                       "--duration", "4", "--noise-px", "0.3", "--clock-offset", "cam2=4",
+                       "--seed", "57352", "-o", session)
+    assert code == 0, err
+    code, _, err = cli("sync", session, "-o", synced)
+    assert code == 0, err
+    by_rig = pslog.fuse(session, ["typeA"], rig=synced).tracks["typeA"]
+    by_copy = pslog.fuse(synced, ["typeA"]).tracks["typeA"]
+    exact = pslog.fuse(session, ["typeA"], rig=synced, clock_uncertainty=False).tracks["typeA"]
+    assert_array_equal(by_rig.quality["std_m"], by_copy.quality["std_m"])
+    assert np.mean(by_rig.quality["std_m"] > exact.quality["std_m"] * 1.001) > 0.5

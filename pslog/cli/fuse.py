@@ -136,8 +136,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from dataclasses import replace
-
     import numpy as np
 
     from pslog import progress
@@ -159,8 +157,8 @@ def run(args: argparse.Namespace) -> int:
     from pslog.log.copy import open_copy
     from pslog.records import by_reason
     from pslog.rig import check_baselines, resolve_rig
-    from pslog.timing import CLOCK_STD_KEY, read_clock_covariance
     from pslog.timing import observations as timed_observations
+    from pslog.timing import read_clock_covariance
 
     output = args.output  # checked before run() (declare_files)
     progress.update(what="reading the session")
@@ -200,18 +198,13 @@ def run(args: argparse.Namespace) -> int:
                             detector_offset_m=None if args.detector_offset_mm is None
                             else args.detector_offset_mm / 1e3,
                             detector_bias_px=args.detector_bias_px)
-    # the detector's default offset, and the synced clocks' covariance: a --rig session
-    # file's clocks (a synced copy's) come with the covariance its sync stored, which the
-    # input session does not hold (hostile38: std_m without it, silently)
-    rig_clock = (read_clock_covariance(rig, rig_metadata)
-                 if args.clock_uncertainty != "off" and CLOCK_STD_KEY in rig_metadata else None)
-    from_rig = rig_clock is not None
-    if from_rig:
-        options = replace(options, clock_covariance=rig_clock)
+    # the detector's default offset, and the synced clocks' covariance (a --rig session
+    # file's: a synced copy's clocks come with the covariance its sync stored)
     options = for_session(options, session.metadata,
-                          rig if args.clock_uncertainty != "off" else None)
+                          rig if args.clock_uncertainty != "off" else None, rig_metadata)
     if args.clock_uncertainty != "off":
-        _say_clock_uncertainty(args, session, options.clock_covariance, from_rig)
+        _say_clock_uncertainty(args, session, options.clock_covariance,
+                               read_clock_covariance(rig, rig_metadata) is not None)
     observations = timed_observations(session.detections, rig)  # the rig's clock model
     if len(observations) == 0:
         raise FusionError(f"{args.session} has no detection to fuse")

@@ -239,20 +239,26 @@ def offline_confirmation(options: FusionOptions) -> FusionOptions:
     return replace(options, confirm_every=every, confirm_sides=sides)
 
 
-def for_session(options: FusionOptions, metadata, rig: Rig | None = None) -> FusionOptions:
+def for_session(options: FusionOptions, metadata, rig: Rig | None = None,
+                rig_metadata=None) -> FusionOptions:
     """``options`` with the session's defaults where they are None: the detector offset
     (:func:`detector_bias_for`), typeA's offline confirmation of every point on each
     camera's side of a kick (:func:`offline_confirmation`) and, given the ``rig`` fused
     with, the covariance of its clocks that ``pslog sync`` stored in the metadata
     (:func:`pslog.timing.read_clock_covariance`: the estimates the rig still holds; none
-    for a session never synced)."""
+    for a session never synced). ``rig_metadata``: the metadata of the session file ``rig``
+    came from (``pslog fuse --rig SYNCED.mcap``, :func:`pslog.rig.resolve_rig`'s
+    ``metadata``), whose sync's covariance goes with its clocks where it has one (session
+    38: they came without it, and std_m held the pixel noise alone, silently)."""
     if options.detector_offset_m is None:
         options = replace(options, detector_offset_m=detector_bias_for(metadata))
     options = offline_confirmation(options)
     if rig is not None and options.clock_covariance is None:
         from ..timing import read_clock_covariance
 
-        clock = read_clock_covariance(rig, metadata or {})
+        clock = read_clock_covariance(rig, rig_metadata or {})
+        if clock is None:
+            clock = read_clock_covariance(rig, metadata or {})
         if clock is not None:
             options = replace(options, clock_covariance=clock)
     return options
