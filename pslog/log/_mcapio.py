@@ -832,9 +832,11 @@ def _csv_kind(path: Path) -> str | None:
             start = f.read(64).removeprefix(b"\xef\xbb\xbf")
     except OSError:
         return None
-    if start.startswith(b"camera,time,u,v"):
+    from .csvio import DETECTION_COLUMNS, TRACK_COLUMNS
+
+    if start.startswith(",".join(DETECTION_COLUMNS[:4]).encode()):  # (its required columns)
         return "detections"
-    if start.startswith(b"time,x,y,z,camera,method"):
+    if start.startswith(",".join(TRACK_COLUMNS).encode()):
         return "tracks"
     return None
 
