@@ -40,13 +40,14 @@ from collections.abc import Callable, Hashable, Iterator, Sequence
 from functools import partial
 from typing import Any
 
-#: the methods' relative cost: CPU seconds of each on the 90-minute three-camera type-A
-#: session of benchmarks/bench_match.py (its gating excluded; sync, typeB and linear, which
-#: do not suit it, guessed from nearest's numpy work). The costliest start first, so that
-#: the longest chain runs beside the others instead of after them (a scheduling hint only:
-#: the results do not depend on it)
-COST = {"smooth": 9.0, "nearest": 1.7, "sync": 1.5, "typeB": 2.0, "linear": 2.0,
-        "typeA": 1.0, "filter": 0.8}
+#: the methods' relative cost: thread CPU seconds of each on the 90-minute three-camera
+#: type-A session of benchmarks/bench_match.py (its gating excluded; benchmarks/
+#: fuse_timeline.py, session 39: smooth 3.38, filter 1.51, typeA 1.28, nearest 1.06; sync,
+#: typeB and linear, which do not suit it, guessed from nearest's numpy work). A scheduling
+#: hint only: the results do not depend on it, the time to the written file does
+#: (:func:`start_order`, :func:`finishing_order`)
+COST = {"smooth": 3.4, "filter": 1.5, "typeA": 1.3, "typeB": 1.2, "linear": 1.2,
+        "nearest": 1.05, "sync": 1.0}
 
 
 _UNSET = object()
@@ -54,11 +55,27 @@ _UNSET = object()
 
 def finishing_order(methods: Sequence[str]) -> list[str]:
     """``methods`` in the order they are expected to end: the cheapest first (:data:`COST`;
-    ties in the asked order). ``pslog fuse`` writes the tracks in this order, each as soon
-    as it and those before it have ended: the file's layout is then the same whatever the
-    scheduling and the number of threads (the same command writes the same bytes), and the
-    costliest method's track, written last, is the only one written after the fusion."""
+    ties in the asked order), as :func:`start_order` starts them. ``pslog fuse`` writes the
+    tracks in this order, each as soon as it and those before it have ended: the file's
+    layout is then the same whatever the scheduling and the number of threads (the same
+    command writes the same bytes), and the costliest method's track, written last, is the
+    only one written after the fusion."""
     return sorted(methods, key=lambda m: COST.get(m, 1.0))
+
+
+def start_order(methods: Sequence[str], workers: int) -> list[int]:
+    """The places in ``methods`` in the order threads take them: on two threads or more the
+    costliest first (the longest chain runs beside the others instead of after them), then
+    the rest cheapest first, so that they end in :func:`finishing_order` and each track is
+    written while the others still fuse; on one thread cheapest first. (Session 39: the
+    costliest first and then the rest costliest first had ``filter``, the first track to
+    write, end last: every track of a default 90-minute ``pslog fuse`` was written after
+    the fusion, 1.9 s of its 8.4 with the cores half idle.)"""
+    ascending = sorted(range(len(methods)), key=lambda i: COST.get(methods[i], 1.0))
+    if workers < 2 or len(ascending) < 2:
+        return ascending
+    first = max(ascending, key=lambda i: COST.get(methods[i], 1.0))  # (ties: the first)
+    return [first] + [i for i in ascending if i != first]
 
 
 def usable_cores() -> int:
@@ -170,8 +187,7 @@ class MethodRun:
         self.threads: list[threading.Thread] = []
         if self.in_turn:
             return
-        # costliest first; ties in the asked order
-        self.order = sorted(range(n), key=lambda i: -COST.get(self.methods[i], 1.0))
+        self.order = start_order(self.methods, workers)
         # the packages numba's first import shares with the rest imported here first: the
         # threads may import numba while another imports one of them (pslog._jit)
         from .._jit import settle_imports
