@@ -184,10 +184,11 @@ def fuse(session: Session | str | os.PathLike[str] | Detections,
     options = offline_confirmation(options or FusionOptions())
     if detections.n_frames == 0:
         raise FusionError("the session has no detection to fuse")
+    pass_before: dict = {}  # (default_methods' gating pass, when it makes one: not made again)
     chosen = ([check_method(m) for m in names] if names is not None
-              else default_methods(detections, used, options))
+              else default_methods(detections, used, options, gated=pass_before))
     progress.step(f"fusing {', '.join(chosen)}")
-    tracks, rejections = fuse_detections(detections, used, chosen, options)
+    tracks, rejections = fuse_detections(detections, used, chosen, options, gated=pass_before)
     return FuseResult(dict(tracks), dict(rejections))
 
 

@@ -12,6 +12,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
+
 from pslog.fusion import FusionOptions, default_methods
 from pslog.log import read_session
 from pslog.rig import load_rig
@@ -60,3 +62,39 @@ def test_default_methods_leave_out_stereo_when_only_a_static_object_shares_insta
     assert done.returncode == 0, done.stderr
     assert "not run on this timing: sync, typeB, linear" in done.stdout, done.stdout
     assert set(read_session(fused).tracks) == {"nearest", "typeA", "smooth", "filter"}
+
+
+def test_the_default_methods_gating_pass_is_the_fusions_own(tmp_path, monkeypatch):
+    """Where ``default_methods`` gates the session to judge its timing (the case above), the
+    fusion takes that pass as its causal form's (typeA, nearest, filter: every choice's
+    doubt) instead of gating again: two passes, not three (on these webcams the pass came
+    before the fusion, on one thread: about a fifth of a 60-s session's ``pslog fuse``). The
+    tracks are those of the methods named, which never make that pass, bit for bit. Fails
+    when the pass is not handed on (three calls of the gate)."""
+    import pslog
+    import pslog.fusion.gating as gating
+
+    rig = _rig(tmp_path / "rig.toml", clocks=False)
+    true = _rig(tmp_path / "true.toml", clocks=True)
+    session = tmp_path / "lab.mcap"
+    done = _pslog("simulate", "--rig", rig, "--motion", "rally", "--duration", "3",
+                  "--noise-px", "0.5", "--readout", "25", "--clock-offset", "cam2=6.4",
+                  "--clock-offset", "cam3=-8.9", "--distractor", "0.2,1.8,0.1", "--seed",
+                  "60203", "-o", session)
+    assert done.returncode == 0, done.stderr
+    calls = []
+    real = gating.gate
+    monkeypatch.setattr(gating, "gate", lambda *a, **k: calls.append(k.get("causal", True))
+                        or real(*a, **k))
+    default = pslog.fuse(session, rig=true)
+    assert sorted(calls) == [False, True], calls  # the offline form (smooth's) and one causal
+    assert set(default.tracks) == {"nearest", "typeA", "smooth", "filter"}
+    named = pslog.fuse(session, list(default.tracks), rig=true)
+    for method, track in default.tracks.items():
+        other = named.tracks[method]
+        np.testing.assert_array_equal(track.time_ns, other.time_ns)
+        np.testing.assert_array_equal(track.position_world, other.position_world)
+        for name, column in track.quality.items():
+            np.testing.assert_array_equal(column, other.quality[name], err_msg=name)
+        assert track.dropped == other.dropped
+        assert default.rejections[method].counts() == named.rejections[method].counts()

@@ -212,11 +212,12 @@ def run(args: argparse.Namespace) -> int:
     if len(seen) < 2:  # say why rather than "too few detections close enough in time"
         raise FusionError(f"{args.session}: only camera {rig.names[int(seen[0])]} has "
                           f"detections; fusing needs at least two cameras")
+    pass_before: dict = {}  # (default_methods' gating pass, when it makes one: not made again)
     if args.methods:
         methods = [check_method(m) for m in dict.fromkeys(args.methods)]
     else:  # every method this timing suits
         # (from the candidates: each frame's ball as the methods will choose it)
-        methods = default_methods(session.detections, rig, options)
+        methods = default_methods(session.detections, rig, options, gated=pass_before)
         skipped = [m for m in METHODS if m not in methods]
         if skipped:
             print(f"not run on this timing: {', '.join(skipped)} (name them with --method "
@@ -255,7 +256,8 @@ def run(args: argparse.Namespace) -> int:
     # (one method, or one usable core: on a thread all the same, the copy going on beside
     # it; --workers 1 keeps everything on this thread, one step after another)
     fusing = start_fusion(detections, rig, methods, options, workers=args.workers,
-                          background=args.workers is None)
+                          background=args.workers is None, gated=pass_before)
+    del pass_before  # (the fusion's now: dropped as it is used)
     del detections  # (held by the gating until the last form is gated)
     # points, left out, gated, flagged, made from the detections after them
     written: dict[str, tuple[int, dict[str, int], int, int, int]] = {}

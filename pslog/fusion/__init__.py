@@ -493,6 +493,7 @@ SHARED_SHARE_MIN = 0.1
 
 def default_methods(
     observations: Observations | Detections, rig: Rig, options: FusionOptions | None = None,
+    *, gated: dict | None = None,
 ) -> list[str]:
     """The methods worth running on these detections' timing, in :data:`METHODS` order.
 
@@ -514,6 +515,11 @@ def default_methods(
     shared, so sync, typeB and linear ran by default on 12-29 points up to 0.94 m off, or,
     on a 4 s session, sync found no shared instant among the gate's choices and the whole
     ``pslog fuse`` stopped, exit 1; the ball's own instants share 0-0.6 %.)
+
+    ``gated``: a dict that keeps that gating pass for the fusion
+    (:func:`pslog.fusion.gating.start_fusion`'s ``gated``: the causal form without a wait,
+    with every choice's doubt, and the forms' shared part), which then gates in that form
+    no more; left empty where no pass was made.
     """
     options = options or FusionOptions()
     check_tolerance(rig, options.tolerance_s)
@@ -533,10 +539,14 @@ def default_methods(
             and np.any(detections.candidates_per_frame() > 1)):
         # (the gate only where its choice could undo the shared instants: a gating pass
         # costs ~0.1 ms a candidate, 10-25 % of a dirty session's pslog fuse)
-        from .gating import gate
+        from .gating import gate, gate_common, pregated
 
-        shared, alone = shares(gate(detections, rig, max_gap_s=options.max_gap_s,
-                                    doubt=False).observations)
+        common = gate_common(detections, rig)
+        chosen = gate(detections, rig, max_gap_s=options.max_gap_s, common=lambda: common,
+                      doubt=gated is not None)
+        if gated is not None:  # (its doubt made only where the fusion will take it)
+            gated.update(pregated(chosen, common))
+        shared, alone = shares(chosen.observations)
     return [name for name, m in METHODS.items() if m.suits(shared, alone)]
 
 

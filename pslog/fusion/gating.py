@@ -3064,14 +3064,15 @@ def prepared_for(gated: Gated, rig: Rig) -> Prepared:
 
 
 def fuse_detections(detections: Detections, rig: Rig, methods, options=None, *,
-                    workers: int | None = None):
+                    workers: int | None = None, gated: dict | None = None):
     """Fuse every method of ``methods`` from all the candidates of ``detections``, gated
     (:func:`gate`, in each method's form; once per form), or, with
     ``options.gating`` False, from each frame's best-scored candidate.
 
     ``workers``: threads fusing methods at once (:mod:`pslog.fusion._parallel`; the same
     tracks and errors as one after another); None: the usable cores, at most one per
-    method; 1: in turn on the calling thread.
+    method; 1: in turn on the calling thread. ``gated``: a pass made before, as
+    :func:`start_fusion`'s.
 
     Returns
     -------
@@ -3080,7 +3081,7 @@ def fuse_detections(detections: Detections, rig: Rig, methods, options=None, *,
     """
     methods = list(methods)
     done = {m: (t, r) for m, t, r in start_fusion(detections, rig, methods, options,
-                                                  workers=workers)}
+                                                  workers=workers, gated=gated)}
     return ({m: done[m][0] for m in methods}, {m: done[m][1] for m in methods})
 
 
@@ -3107,11 +3108,32 @@ class FusionRun:
                 yield method, out, Rejections.empty()
 
 
+#: the gating form :func:`pslog.fusion.default_methods` gates in when it gates (causal,
+#: no wait: :func:`gating_key`'s for typeA, nearest and filter), and the key of the forms'
+#: shared part in :func:`pregated`'s dict
+_PREGATED_FORM = (True, 0.0)
+_PREGATED_COMMON = "common"
+
+
+def pregated(chosen: Gated, common: tuple) -> dict:
+    """A gating pass made before the fusion (:func:`pslog.fusion.default_methods`' : the
+    causal form without a wait, every choice's doubt made) and the forms' shared part
+    (:func:`gate_common`), as :func:`start_fusion`'s ``gated`` takes them."""
+    return {_PREGATED_FORM: chosen, _PREGATED_COMMON: common}
+
+
 def start_fusion(detections: Detections, rig: Rig, methods, options=None, *,
-                 workers: int | None = None, background: bool = False) -> FusionRun:
+                 workers: int | None = None, background: bool = False,
+                 gated: dict | None = None) -> FusionRun:
     """:func:`fuse_detections` started (on threads, at once; ``workers=1``: each method
     as the iteration reaches it, unless ``background``: on one thread), its tracks
-    delivered as each method ends: the caller writes them meanwhile (``pslog fuse``)."""
+    delivered as each method ends: the caller writes them meanwhile (``pslog fuse``).
+
+    ``gated``: :func:`pregated`'s dict of a pass made before (``default_methods(...,
+    gated=)``, the same detections, rig and options): its form is not gated again where
+    the methods take every choice's doubt in it, nor the forms' shared part made again
+    (the same tracks, bit for bit: the same call; walk38's webcams, where that pass was
+    the fusion's third, before it and on one thread). Emptied as it is used."""
     from . import METHODS, FusionOptions, check_method, fuse, prepare
     from ._parallel import MethodProgress, MethodRun, default_workers
 
@@ -3136,6 +3158,11 @@ def start_fusion(detections: Detections, rig: Rig, methods, options=None, *,
     lock = threading.Lock()
     shared: dict = {}
 
+    given = {} if gated is None else gated
+    if _PREGATED_COMMON in given:
+        shared["value"] = given.pop(_PREGATED_COMMON)
+        shared["left"] = forms
+
     def common() -> tuple:
         with lock:
             if "value" not in shared:
@@ -3156,7 +3183,13 @@ def start_fusion(detections: Detections, rig: Rig, methods, options=None, *,
             doubting[key] = True if doubting.get(key) is True else METHODS[m].doubt
 
     def gated_input(key, method: str) -> tuple[Gated, Prepared | None]:  # once per form
-        gated = gate_for(detections, rig, method, options, common, doubting.get(key, False))
+        made = given.pop(key, None) if doubting.get(key, False) is True else None
+        if made is not None:  # (the pass before, the same call: see the docstring)
+            gated = made
+            common()  # (its use of the shared part, counted as each form's is)
+        else:
+            gated = gate_for(detections, rig, method, options, common,
+                             doubting.get(key, False))
         return gated, (prepared_for(gated, rig) if len(rig) >= 2 else None)
 
     def fused(method: str, shared: tuple[Gated, Prepared | None]):
@@ -3187,6 +3220,7 @@ __all__ = [
     "gate",
     "gate_for",
     "gating_key",
+    "pregated",
     "prepared_for",
     "start_fusion",
 ]
