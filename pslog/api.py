@@ -206,9 +206,11 @@ class SyncOutcome:
         at its logged time: what the estimator fitted
     regularized : camera name -> :class:`pslog.timing.RegularizeReport`
     notes : what was done that a user should know (regularized stamps, rejected candidates)
-    prior : the rig whose clock model the estimate started from and tested against: the
-        session's, or, for a copy synced before, the one recorded before its first sync
-        (:func:`pslog.timing.recorded_clocks`)
+    prior : the clock model before any sync, recorded with the copy for the next sync: the
+        session's rig, or, for a copy synced before, the one recorded before its first sync
+        (:func:`pslog.timing.recorded_clocks` of every clock parameter); the estimate
+        started from it and tested against it for the parameters it estimates (or auto
+        tests), the others kept at the copy's values
     prior_estimated : whether ``prior`` holds clock estimates of an earlier sync that did
         not record its own starting model (a pslog before session 38), as known values: said
         in ``notes`` and recorded with the copy, so that every later sync says it too
@@ -364,8 +366,11 @@ def sync(session: Session | str | os.PathLike[str],
         raise FusionError(f"{exc}; note: {several} of {detections.n_frames} frames hold "
                           f"several candidates and a false one the gating kept (a "
                           f"reflection, a second ball) may be the cause") from None
-    return SyncOutcome(result.rig, result, detections, obs, reports, tuple(notes), rig,
-                       prior_estimated)
+    # the model recorded for the next sync: every parameter's, those this sync kept at the
+    # copy's values too (they are an earlier sync's estimates of this data: recording them
+    # as the prior lost the model before the first sync; review39)
+    return SyncOutcome(result.rig, result, detections, obs, reports, tuple(notes),
+                       recorded_clocks(read.rig, read.metadata)[0], prior_estimated)
 
 
 def _prior_estimated(metadata) -> bool:

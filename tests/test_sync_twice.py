@@ -136,6 +136,16 @@ def test_a_parameter_the_new_sync_does_not_estimate_keeps_the_copys_value(tmp_pa
     synced = read_session(twice).rig.cameras
     assert [c.clock_offset for c in synced] == offsets
     assert all(0.004 < c.readout < 0.020 for c in synced), [c.readout for c in synced]
+    # the model before the first sync is carried, the kept offsets' too (review39: the copy
+    # recorded the first sync's offsets as its prior, and a third sync started from them,
+    # its note saying it started from the model recorded before the first sync): a third
+    # sync of both parameters is the same sync of the session itself
+    stored = json.loads(read_session(twice).metadata["clock_std"])
+    assert stored["prior"] == json.loads(read_session(once).metadata["clock_std"])["prior"]
+    thrice, fresh = tmp_path / "thrice.mcap", tmp_path / "fresh.mcap"
+    _pslog("sync", twice, "-o", thrice, "--estimate", "offset,readout")
+    _pslog("sync", raw, "-o", fresh, "--estimate", "offset,readout")
+    assert _clocks(thrice)[0] == _clocks(fresh)[0]
 
 
 def test_auto_keeps_a_drift_it_does_not_try_where_the_ball_spans_less_than_30_s(tmp_path):
