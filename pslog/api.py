@@ -27,7 +27,7 @@ from typing import TYPE_CHECKING, Literal
 import numpy as np
 
 from .errors import FusionError, InputError
-from .records import Detections, Observations, Track, Truth
+from .records import NS, Detections, Observations, Track, Truth
 
 if TYPE_CHECKING:  # the heavy modules load when first called, not at `import pslog`
     from .estimation.sync import SyncResult
@@ -207,9 +207,11 @@ class SyncOutcome:
         at its logged time: what the estimator fitted
     regularized : camera name -> :class:`pslog.timing.RegularizeReport`
     notes : what was done that a user should know (regularized stamps, rejected candidates)
-    prior : the rig whose clock model the estimate started from and tested against: the
-        session's, or, for a copy synced before, the one recorded before its first sync
-        (:func:`pslog.timing.recorded_clocks`)
+    prior : the clock model before any sync, recorded with the copy for the next sync: the
+        session's rig, or, for a copy synced before, the one recorded before its first sync
+        (:func:`pslog.timing.recorded_clocks` of every clock parameter); the estimate
+        started from it and tested against it for the parameters it estimates (or auto
+        tests), the others kept at the copy's values
     prior_estimated : whether ``prior`` holds clock estimates of an earlier sync that did
         not record its own starting model (a pslog before session 38), as known values: said
         in ``notes`` and recorded with the copy, so that every later sync says it too
@@ -293,27 +295,24 @@ def sync(session: Session | str | os.PathLike[str],
     # estimates are this data's, not known values: docs/timing.md, "Syncing a synced copy")
     # (only the parameters this sync estimates, or auto tests: one it does not keeps the
     # copy's value, as --estimate says)
-    if estimate == ["auto"]:
-        times = read.detections.frame_time_ns
-        span = float(times.max() - times.min()) / 1e9 if len(times) else 0.0
-        names = ["offset", "readout", *(["drift"] if span >= AUTO_DRIFT_MIN_S else [])]
-    else:
-        names = ["readout" if p == SHARED_READOUT else p for p in estimate]
-    rig, resynced = recorded_clocks(read.rig, read.metadata,
-                                    tuple(RIG_KEY[p] for p in PARAMETERS if p in names))
+    def restart(times: np.ndarray) -> tuple[Rig, bool]:
+        """The rig the estimate starts from, and whether a recorded value was put back;
+        ``times``: the ball's (auto tests drifts where they span AUTO_DRIFT_MIN_S, as
+        select_clocks measures it on the observations)."""
+        if estimate == ["auto"]:
+            span = float(times.max() - times.min()) / NS if len(times) else 0.0
+            names = ["offset", "readout", *(["drift"] if span >= AUTO_DRIFT_MIN_S else [])]
+        else:
+            names = ["readout" if p == SHARED_READOUT else p for p in estimate]
+        return recorded_clocks(read.rig, read.metadata,
+                               tuple(RIG_KEY[p] for p in PARAMETERS if p in names))
+
+    # (the frames holding a candidate until the ball is chosen: the rig the gate uses)
+    rig, resynced = restart(read.detections.frame_time_ns[
+        read.detections.candidates_per_frame() > 0])
     check_baselines(rig, str(read.path))
     detections = read.detections
     notes: list[str] = []
-    prior_estimated = _prior_estimated(read.metadata)
-    if prior_estimated:  # (a copy of an older pslog's, or synced from one since: each time)
-        notes.append("synced before by a pslog that did not record the clock model it "
-                     "started from (before session 38): the copy's clock estimates are "
-                     "taken as the rig's values, those not estimated again kept without "
-                     "their uncertainty; sync the original session to estimate them again")
-    elif resynced:
-        notes.append("synced before: estimated again from the clock model recorded before "
-                     "its first sync (that sync's estimates are this data's, not known "
-                     "values)")
     reports: dict = {}
     if regularize != "off":
         progress.step("checking host timestamps")
@@ -341,6 +340,20 @@ def sync(session: Session | str | os.PathLike[str],
         notes.append(gated_note)
     if len(obs) == 0:
         raise FusionError(f"{read.path} has no detection: nothing to sync on")
+    # auto's drift test on the ball's observations' span, as select_clocks decides it (the
+    # frames' span put a first sync's drift back to the recorded model where auto then did
+    # not try drifts: the ball seen 10 s of a 31 s session, its drift lost in silence)
+    rig, resynced = restart(obs.time_ns)
+    prior_estimated = _prior_estimated(read.metadata)
+    if prior_estimated:  # (a copy of an older pslog's, or synced from one since: each time)
+        notes.insert(0, "synced before by a pslog that did not record the clock model it "
+                     "started from (before session 38): the copy's clock estimates are "
+                     "taken as the rig's values, those not estimated again kept without "
+                     "their uncertainty; sync the original session to estimate them again")
+    elif resynced:
+        notes.insert(0, "synced before: estimated again from the clock model recorded "
+                     "before its first sync (that sync's estimates are this data's, not "
+                     "known values)")
     progress.step(f"choosing the clock model (auto) of {len(rig)} cameras" if estimate == ["auto"]
                   else f"estimating {', '.join(estimate)} of {len(rig)} clocks")
     try:
@@ -354,8 +367,11 @@ def sync(session: Session | str | os.PathLike[str],
         raise FusionError(f"{exc}; note: {several} of {detections.n_frames} frames hold "
                           f"several candidates and a false one the gating kept (a "
                           f"reflection, a second ball) may be the cause") from None
-    return SyncOutcome(result.rig, result, detections, obs, reports, tuple(notes), rig,
-                       prior_estimated)
+    # the model recorded for the next sync: every parameter's, those this sync kept at the
+    # copy's values too (they are an earlier sync's estimates of this data: recording them
+    # as the prior lost the model before the first sync; review39)
+    return SyncOutcome(result.rig, result, detections, obs, reports, tuple(notes),
+                       recorded_clocks(read.rig, read.metadata)[0], prior_estimated)
 
 
 def _prior_estimated(metadata) -> bool:

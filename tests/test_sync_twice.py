@@ -136,3 +136,60 @@ def test_a_parameter_the_new_sync_does_not_estimate_keeps_the_copys_value(tmp_pa
     synced = read_session(twice).rig.cameras
     assert [c.clock_offset for c in synced] == offsets
     assert all(0.004 < c.readout < 0.020 for c in synced), [c.readout for c in synced]
+    # the model before the first sync is carried, the kept offsets' too (review39: the copy
+    # recorded the first sync's offsets as its prior, and a third sync started from them,
+    # its note saying it started from the model recorded before the first sync): a third
+    # sync of both parameters is the same sync of the session itself
+    stored = json.loads(read_session(twice).metadata["clock_std"])
+    assert stored["prior"] == json.loads(read_session(once).metadata["clock_std"])["prior"]
+    thrice, fresh = tmp_path / "thrice.mcap", tmp_path / "fresh.mcap"
+    _pslog("sync", twice, "-o", thrice, "--estimate", "offset,readout")
+    _pslog("sync", raw, "-o", fresh, "--estimate", "offset,readout")
+    assert _clocks(thrice)[0] == _clocks(fresh)[0]
+
+
+def test_auto_keeps_a_drift_it_does_not_try_where_the_ball_spans_less_than_30_s(tmp_path):
+    """``--estimate auto`` tries drifts on the ball's observations' span (30 s or more,
+    select_clocks): a copy synced for its drifts, synced again with auto where the ball is
+    seen 10 s of a 31 s session, keeps them (auto does not estimate them: "kept at the
+    rig's values"), the offsets estimated again at them. Found in session 39's review: the
+    span was the frames' (31 s), so the drifts were put back to the recorded 0 in silence
+    (cam2's 221 ppm) and the offsets absorbed them (6.8 -> 12.6 ms; the truth 5)."""
+    raw = tmp_path / "raw.mcap"
+    _pslog("simulate", "--rig", "paper3", "--timing", "typeA", "--motion", "rally",
+           "--duration", "31", "--noise-px", "0.3", "--clock-offset", "cam2=5", "--drift",
+           "cam2=300", *(a for cam in ("cam1", "cam2", "cam3")
+                         for a in ("--blackout", f"{cam}=0:21")), "--seed", 60201, "-o", raw)
+    once, twice = tmp_path / "once.mcap", tmp_path / "twice.mcap"
+    _pslog("sync", raw, "-o", once, "--estimate", "offset,drift")
+    out = _pslog("sync", once, "-o", twice)
+    assert "drifts not estimated: not tried, the session (10 s) is shorter" in out, out
+    drifts = [c.clock_drift_ppm for c in read_session(once).rig.cameras]
+    assert drifts[1] > 100, drifts  # (the case: a drift the first sync estimated)
+    synced = read_session(twice).rig.cameras
+    assert [c.clock_drift_ppm for c in synced] == drifts
+    assert abs(synced[1].clock_offset - read_session(once).rig.cameras[1].clock_offset) < 1e-5
+
+
+def test_a_clock_value_edited_in_the_copys_rig_is_the_start_of_the_next_sync(tmp_path):
+    """recorded_clocks puts back a recorded value only where the copy's rig still holds the
+    value its sync stored: a copy whose cam2 offset was edited since (its rig replaced, the
+    metadata kept) is synced from that edited offset, cam3's unedited one put back to the
+    recorded 0 — the ``prior`` the new copy records. (The import test above keeps no
+    metadata: it never reached this rule; without the rule's test this one fails.)"""
+    from pslog.log import copy_session
+
+    raw = tmp_path / "raw.mcap"
+    _simulate(raw, 60202, cam3=True)
+    once, edited, twice = (tmp_path / f"{n}.mcap" for n in ("once", "edited", "twice"))
+    _pslog("sync", raw, "-o", once, "--estimate", "offset")
+    rig = read_session(once).rig
+    assert abs(rig.cameras[2].clock_offset + 0.007) < 0.002  # (the case: estimated)
+    copy_session(once, edited, rig=rig.__class__(
+        (rig.cameras[0], rig.cameras[1].replace(clock_offset=0.004), rig.cameras[2]),
+        rig.name))
+    assert "clock_std" in read_session(edited).metadata
+    _pslog("sync", edited, "-o", twice, "--estimate", "offset")
+    prior = json.loads(read_session(twice).metadata["clock_std"])["prior"]
+    assert prior["cam2"]["clock_offset"] == 0.004
+    assert prior["cam3"]["clock_offset"] == 0.0
