@@ -505,16 +505,19 @@ def default_methods(
     rolling shutters whose corrected times now and then fall within the tolerance share a
     few percent, too few for stereo or for ``typeB``'s predictions between them.
 
-    Given Detections, the instants are each frame's best-scored candidate's; when those
-    share enough, and the methods' choice could move them (``options.gating``, a rig with
-    rolling shutters: a readout-corrected time is its candidate's row's; frames of several
-    candidates), they are those of each frame's ball as the methods choose it
-    (:func:`pslog.fusion.gating.gate`). (Walk38: a static
-    second orange object, best-scored in most frames of a synced three-webcam session, lay
-    at rows whose corrected times fell within 1 ms in two cameras: 16-19 % of the instants
-    shared, so sync, typeB and linear ran by default on 12-29 points up to 0.94 m off, or,
-    on a 4 s session, sync found no shared instant among the gate's choices and the whole
-    ``pslog fuse`` stopped, exit 1; the ball's own instants share 0-0.6 %.)
+    Given Detections, the instants are each frame's best-scored candidate's; where the
+    methods' choice could move them (``options.gating``, a rig with rolling shutters: a
+    readout-corrected time is its candidate's row's; frames of several candidates), they
+    are those of each frame's ball as the methods choose it
+    (:func:`pslog.fusion.gating.gate`), whether the best-scored ones share or not (review39:
+    a ``typeB`` pair with 8 ms readouts and a static object in one camera, best-scored 9.8 %
+    shared, the ball as chosen 15.4 %: ``sync``, ``typeB`` and ``linear`` were left out).
+    (Walk38: a static second orange object, best-scored in most frames of a synced
+    three-webcam session, lay at rows whose corrected times fell within 1 ms in two
+    cameras: 16-19 % of the instants shared, so sync, typeB and linear ran by default on
+    12-29 points up to 0.94 m off, or, on a 4 s session, sync found no shared instant among
+    the gate's choices and the whole ``pslog fuse`` stopped, exit 1; the ball's own instants
+    share 0-0.6 %.)
 
     ``gated``: a dict that keeps that gating pass for the fusion
     (:func:`pslog.fusion.gating.start_fusion`'s ``gated``: the causal form without a wait,
@@ -534,11 +537,11 @@ def default_methods(
 
     assert isinstance(timed, Observations)
     shared, alone = shares(timed)
-    if (shared and detections is not None and options.gating and len(rig) >= 2
+    if (detections is not None and options.gating and len(rig) >= 2
             and any(c.readout for c in rig.cameras)
             and np.any(detections.candidates_per_frame() > 1)):
-        # (the gate only where its choice could undo the shared instants: a gating pass
-        # costs ~0.1 ms a candidate, 10-25 % of a dirty session's pslog fuse)
+        # (the gate only where its choice could move the instants; ~0.1 ms a frame of
+        # several candidates, the fusion's own causal pass where ``gated`` hands it on)
         from .gating import gate, gate_common, pregated
 
         common = gate_common(detections, rig)
