@@ -1174,31 +1174,45 @@ _WATCHDOG = """
 import os, shutil, signal, sys, time
 temp, batch = os.path.realpath(sys.argv[1]), int(sys.argv[2])
 sys.stdin.buffer.read()  # until the batch's end of the pipe closes
-def holders():
-    found = set()
+def holds(pid):
+    try:
+        for fd in os.listdir(f"/proc/{pid}/fd"):
+            if os.readlink(f"/proc/{pid}/fd/{fd}").startswith(temp + os.sep):
+                return True
+    except OSError:
+        pass
+    return False
+def kill_holders():
+    # each process checked and killed in turn, through a pidfd opened before a second
+    # check: the process killed is one that holds a file in the folder, never one that took
+    # the pid of a holder that ended meanwhile (review39); os.kill where there is no pidfd
     try:
         pids = [int(p) for p in os.listdir("/proc") if p.isdigit()]
     except OSError:
-        return found
+        return 0
+    killed = 0
     for pid in pids:
-        if pid in (os.getpid(), batch):  # (a batch that ends normally holds its logs)
+        if pid in (os.getpid(), batch) or not holds(pid):  # (a batch ending well holds logs)
             continue
         try:
-            for fd in os.listdir(f"/proc/{pid}/fd"):
-                if os.readlink(f"/proc/{pid}/fd/{fd}").startswith(temp + os.sep):
-                    found.add(pid)
-                    break
-        except OSError:
-            pass
-    return found
-for _ in range(3):  # (a process may still be opening its logs as the first pass runs)
-    left = holders()
-    for pid in left:
+            fd = os.pidfd_open(pid)
+        except (AttributeError, OSError):
+            fd = None
         try:
-            os.kill(pid, signal.SIGKILL)
+            if holds(pid):
+                if fd is not None:
+                    signal.pidfd_send_signal(fd, signal.SIGKILL)
+                else:
+                    os.kill(pid, signal.SIGKILL)
+                killed += 1
         except OSError:
             pass
-    if not left:
+        finally:
+            if fd is not None:
+                os.close(fd)
+    return killed
+for _ in range(3):  # (a process may still be opening its logs as the first pass runs)
+    if not kill_holders():
         break
     time.sleep(0.2)
 shutil.rmtree(temp, ignore_errors=True)
