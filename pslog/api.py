@@ -122,7 +122,11 @@ def fuse(session: Session | str | os.PathLike[str] | Detections,
     rig : a corrected rig (same camera names and order) instead of the session's; e.g.
         ``pslog.sync(session).rig``; or, as ``pslog fuse --rig``, a built-in rig's name or a
         rig file (pslog's TOML, its whole rig; or an aniposelib / Pose2Sim / OpenCV
-        calibration, its geometry only: the session's frame rates, offsets and clocks stay)
+        calibration, its geometry only: the session's frame rates, offsets and clocks stay).
+        A synced copy's clocks come with its sync's covariance when ``rig`` is the copy's
+        path; a :class:`~pslog.rig.Rig` object carries no metadata, so its clocks count as
+        exact unless ``options.clock_covariance`` gives their covariance
+        (:func:`pslog.timing.read_clock_covariance` of the rig and the copy's metadata)
     options : :class:`pslog.fusion.FusionOptions` (tolerance, max gap, noise, gating); its
         ``detector_offset_m`` None takes the session's default
         (:func:`pslog.fusion.detector_bias_for`: 0 for simulated sessions and bare
