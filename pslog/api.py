@@ -262,6 +262,7 @@ def sync(session: Session | str | os.PathLike[str],
         PARAMETERS,
         RIG_KEY,
         SHARED_READOUT,
+        ClockSpanError,
         estimate_clocks,
     )
     from .rig import check_baselines
@@ -348,8 +349,10 @@ def sync(session: Session | str | os.PathLike[str],
         # with false candidates (a distractor) the failure may be theirs, not the ball's
         # motion's; say so
         several = int((detections.candidates_per_frame() > 1).sum())
-        if not several:
+        if not several or isinstance(exc, ClockSpanError):
             raise
+        if gated_note and "lost every one" in gated_note:  # (the gating's loss, said)
+            raise FusionError(f"{exc}; note: {gated_note.split('; ', 1)[1]}") from None
         raise FusionError(f"{exc}; note: {several} of {detections.n_frames} frames hold "
                           f"several candidates and a false one the gating kept (a "
                           f"reflection, a second ball) may be the cause") from None
@@ -375,6 +378,17 @@ def _prior_estimated(metadata) -> bool:
         return False
 
 
+#: share of the frames with a candidate that losing every candidate to sync's gating (at the
+#: logged clocks) says the clocks are likely too far apart for it (walk39: 0.3 % on one clock,
+#: 39 % with one camera's clock 30 ms off)
+LOST_FRAMES_SHARE = 0.2
+_LOST_NOTE = ("{lost} of {seen} frames with a candidate lost every one, the ball's too: the "
+              "cameras' logged clocks are likely further apart than the gate allows (a few "
+              "ms), and the clocks estimated from what is left may be wrong: give each "
+              "camera's approximate clock_offset (seconds) in the rig, where pslog sync "
+              "starts (docs/timing.md)")
+
+
 def _ball_candidates(detections: Detections, rig: Rig):
     """Each frame's ball at its LOGGED time: the best-scored candidate when no frame holds
     more than one, else the one the gating stage chooses (:func:`pslog.fusion.gating.gate`,
@@ -386,9 +400,17 @@ def _ball_candidates(detections: Detections, rig: Rig):
     from .fusion.gating import gate
 
     gated = gate(detections, rig, causal=False)
+    kept = gated.kept(detections)
     note = (f"{len(gated.rejections)} of {len(gated.chosen)} candidates rejected by gating "
             f"(the ball chosen among each frame's candidates, as `pslog fuse` does)")
-    return gated.kept(detections).best(), note
+    seen = detections.candidates_per_frame() > 0
+    lost = int(np.count_nonzero(seen & (kept.candidates_per_frame() == 0)))
+    if lost > LOST_FRAMES_SHARE * np.count_nonzero(seen):
+        # (walk39: two hosts' clocks 30 ms, 0.25 s, 3 s apart: 39, 87, 90 % of the frames
+        # lost, the ball's own detections, against 0.3 % on one clock; the offsets written
+        # then 0.4 ms (3.5 σ), 206 ms and 3 s wrong, with a clean-looking table)
+        note += "; " + _LOST_NOTE.format(lost=lost, seen=int(np.count_nonzero(seen)))
+    return kept.best(), note
 
 
 def _from_session_start(detections: Detections) -> tuple[Detections, int]:

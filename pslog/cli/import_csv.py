@@ -15,8 +15,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="detections CSV, header camera,time,u,v (optional frame,score); "
                              "time in seconds on any clock common to the cameras (negative or "
                              "Unix-epoch too: the session records its origin and 'pslog "
-                             "export' gives the times back), pixels as detected; rows in any "
-                             "order; a row with u and v empty: a frame without a detection")
+                             "export --detections / --csv' give the times back), pixels as "
+                             "detected; rows in any order; a row with u and v empty: a "
+                             "frame without a detection")
     parser.add_argument("--timing", default="rig", choices=(*TIMING_PRESETS, "rig"),
                         help="set the rig's shutter offsets from a preset (default: 'rig', the "
                              "rig's own offsets); the session's timing label names the preset "
@@ -59,4 +60,32 @@ def run(args: argparse.Namespace) -> int:
           f"({', '.join(rig.names)})"
           + (f"; session clock origin {format_time(origin_ns)} s (the CSV's times = session "
              f"times + origin)" if origin_ns else ""))
+    apart = _apart_in_time(detections)
+    if apart is not None:
+        print(apart)
     return 0
+
+
+def _apart_in_time(detections) -> str | None:
+    """A note when some camera's frames do not overlap another's in time: the CSV's times
+    are then not on one clock (e.g. each camera's own clock, years apart: walk39's import
+    wrote a "session" of 56 years, and pslog sync blamed false candidates)."""
+    import numpy as np
+
+    from pslog.log.csvio import format_time
+
+    times, cams = detections.frame_time_ns, detections.frame_camera
+    names = detections.camera_names
+    spans = sorted((int(times[cams == c].min()), int(times[cams == c].max()), names[c])
+                   for c in range(len(names)) if np.any(cams == c))
+    end, before = spans[0][1], spans[0][2]  # (the latest end so far, and its camera)
+    for start, stop, after in spans[1:]:
+        if start > end:  # (a gap in time no camera spans: nothing across it is fused)
+            return (f"note: camera {after}'s frames start {format_time(start - end)} s after "
+                    f"camera {before}'s end: the times of the cameras do not overlap, they are "
+                    f"not on one clock; nothing can be fused until they are ('pslog sync' "
+                    f"searches each clock's offset within half a frame period, "
+                    f"--search-ms widens it): shift a camera's times in the CSV")
+        if stop > end:
+            end, before = stop, after
+    return None
