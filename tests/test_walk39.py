@@ -5,7 +5,9 @@ a process on files it writes.
 - Tracks of a session imported on Unix-epoch times: ``--csv`` wrote them on that clock,
   ``--tum`` (and JSON lines, Parquet, C3D) on the session clock, and ``pslog info`` said
   "'pslog export' adds it" (the origin): a TUM truth of the user's own shared no time with
-  the exported poses. Export now says which files keep the session clock, and the origin.
+  the exported poses. Export now says which files keep the session clock, and the origin;
+  ``pslog eval`` of such a session (no truth) said only which sessions have one, and now
+  where a truth of the user's own is compared.
 - Each camera's times on its own clock (e.g. seconds since the camera booted beside a host's
   Unix-epoch stamps): ``pslog import`` wrote a "session" of 56 years without a word, and
   ``pslog sync`` then said "camera right has 0 detections within 120 ms of one of camera
@@ -99,6 +101,11 @@ def test_export_says_which_formats_keep_the_session_clock(tmp_path):
            "session clock" in _ok("info", fused)
     plain = _ok("export", fused, "--csv", tmp_path / "t2.csv")  # (nothing to say)
     assert "note" not in plain, plain
+    # eval of it (no truth) says where a truth of the user's own is compared
+    first = _ok("eval", fused).splitlines()[0]
+    assert first.endswith(f"(to compare with a truth of your own, e.g. motion capture: 'pslog "
+                          f"export {fused} --csv TRACKS.csv', the original times, or --tum "
+                          f"DIR for evo_ape: docs/interchange.md)"), first
 
 
 def test_sync_says_when_its_gating_lost_the_ball_to_far_clocks(tmp_path):
