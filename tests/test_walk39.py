@@ -8,6 +8,10 @@ a process on files it writes.
   the exported poses. Export now says which files keep the session clock, and the origin;
   ``pslog eval`` of such a session (no truth) said only which sessions have one, and now
   where a truth of the user's own is compared.
+- One CSV per camera: ``--detections left.csv --detections right.csv`` imported the right
+  camera's alone (the second option replaced the first) and said "2 cameras (left,
+  right)". A repeated ``--detections`` is now a command-line error, and a rig camera
+  without a row is said.
 - Each camera's times on its own clock (e.g. seconds since the camera booted beside a host's
   Unix-epoch stamps): ``pslog import`` wrote a "session" of 56 years without a word, and
   ``pslog sync`` then said "camera right has 0 detections within 120 ms of one of camera
@@ -143,3 +147,26 @@ def test_sync_failing_after_its_gating_lost_the_ball_says_so(tmp_path):
     assert done.returncode == 1 and len(done.stderr.strip().splitlines()) == 1, done
     assert "frames with a candidate lost every one, the ball's too" in done.stderr, done.stderr
     assert "a false one the gating kept" not in done.stderr, done.stderr  # (not the cause)
+
+
+def test_one_csv_per_camera_is_not_silently_half_imported(tmp_path):
+    both = _shifted_csv(tmp_path, "0")
+    with open(both, newline="") as fh:
+        rows = list(csv.reader(fh))
+    files = []
+    for cam in ("cam1", "cam2"):
+        path = tmp_path / f"{cam}.csv"
+        with open(path, "w", newline="") as fh:
+            csv.writer(fh).writerows([rows[0]] + [r for r in rows[1:] if r[0] == cam])
+        files.append(path)
+    out = tmp_path / "two.mcap"
+    done = _run("import", "--rig", "paper2", "--detections", files[0], "--detections",
+                files[1], "-o", out)
+    assert done.returncode == 2 and done.stdout == "", done
+    assert done.stderr == (f"pslog import: error: argument --detections: given twice "
+                           f"({files[0]}, {files[1]}): pslog import reads one CSV holding "
+                           f"every camera's rows (column camera); join the cameras' files into "
+                           f"one first (docs/log-format.md) (see 'pslog import --help')\n")
+    assert not out.exists()
+    said = _ok("import", "--rig", "paper2", "--detections", files[1], "-o", out)
+    assert f"note: {files[1]} has no frame of camera cam1: nothing of it to fuse" in said, said

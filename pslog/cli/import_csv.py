@@ -7,11 +7,25 @@ import argparse
 from ._common import add_force, add_rig, declare_files
 
 
+class _OneCsv(argparse.Action):
+    """``--detections`` given once: a second one silently replaced the first (walk39: one
+    CSV per camera, ``--detections left.csv --detections right.csv``, imported the right
+    camera's alone and said "2 cameras")."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        before = getattr(namespace, self.dest, None)
+        if before is not None:
+            parser.error(f"argument --detections: given twice ({before}, {values}): pslog "
+                         f"import reads one CSV holding every camera's rows (column camera); "
+                         f"join the cameras' files into one first (docs/log-format.md)")
+        setattr(namespace, self.dest, values)
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from pslog.rig import TIMING_PRESETS
 
     add_rig(parser)
-    parser.add_argument("--detections", required=True, metavar="DET.csv",
+    parser.add_argument("--detections", required=True, metavar="DET.csv", action=_OneCsv,
                         help="detections CSV, header camera,time,u,v (optional frame,score); "
                              "time in seconds on any clock common to the cameras (negative or "
                              "Unix-epoch too: the session records its origin and 'pslog "
@@ -63,6 +77,11 @@ def run(args: argparse.Namespace) -> int:
     apart = _apart_in_time(detections)
     if apart is not None:
         print(apart)
+    unseen = [name for c, name in enumerate(rig.names)
+              if not (detections.frame_camera == c).any()]
+    if unseen:  # (a rig camera without a row: its CSV left out?)
+        print(f"note: {args.detections} has no frame of camera{'s' if len(unseen) > 1 else ''} "
+              f"{', '.join(unseen)}: nothing of {'them' if len(unseen) > 1 else 'it'} to fuse")
     return 0
 
 
