@@ -419,13 +419,18 @@ def _ball_candidates(detections: Detections, rig: Rig):
     if not np.any(detections.candidates_per_frame() > 1) or len(rig) < 2:
         return detections.best(), None, None
     from .fusion.gating import gate
+    from .records import point_keys
 
     gated = gate(detections, rig, causal=False)
     kept = gated.kept(detections)
     note = (f"{len(gated.rejections)} of {len(gated.chosen)} candidates rejected by gating "
             f"(the ball chosen among each frame's candidates, as `pslog fuse` does)")
-    seen = detections.candidates_per_frame() > 0
-    lost = int(np.count_nonzero(seen & (kept.candidates_per_frame() == 0)))
+    per_frame = detections.candidates_per_frame()
+    seen = per_frame > 0
+    # (frames lost to the epipolar gate: a static object alone in a frame, the ball missed,
+    # goes for motion; the ball at clocks too far apart, for epipolar)
+    lost = gated.rejections.frames_lost_to_epipolar(
+        point_keys(detections.frame_time_ns, detections.frame_camera), per_frame)
     # (walk39: two hosts' clocks 30 ms, 0.25 s, 3 s apart: 39, 87, 90 % of the frames lost,
     # the ball's own detections, against 0.3 % on one clock; the offsets written then 0.4 ms
     # (3.5 σ), 206 ms and 3 s wrong, with a clean-looking table)
