@@ -269,6 +269,7 @@ def sync(session: Session | str | os.PathLike[str],
         PARAMETERS,
         RIG_KEY,
         SHARED_READOUT,
+        ClockSpanError,
         estimate_clocks,
     )
     from .rig import check_baselines
@@ -339,7 +340,26 @@ def sync(session: Session | str | os.PathLike[str],
                 notes.append(f"{early} frame(s) regularized to before the session clock's "
                              f"zero left out of the copy")
     progress.step("choosing the ball among candidates")
-    obs, gated_note = _ball_candidates(detections, rig)
+    obs, gated_note, lost = _ball_candidates(detections, rig)
+    if lost:
+        # the gating at the logged clocks lost the ball itself (clocks further apart than its
+        # epipolar test allows: walk39, two hosts' clocks 30 ms to 3 s apart): rough clocks
+        # from each frame's best-scored candidate first (the robust fit takes a false one as
+        # an outlier), and the gating again at them
+        try:
+            rough = estimate_clocks(detections.best(), rig, ("offset",), search_s,
+                                    regularized=reports).rig
+        except FusionError:
+            rough = None
+        again = None if rough is None else _ball_candidates(detections, rough)
+        if again is not None and not again[2]:
+            gated_note = (f"{again[1]}, at clocks estimated first from each frame's "
+                          f"best-scored candidate: at the logged clocks the gating lost "
+                          f"{lost[0]} of {lost[1]} frames with a candidate, the ball's too "
+                          f"(clocks further apart than it allows)")
+            obs, lost = again[0], None
+        else:
+            gated_note += "; " + _LOST_NOTE.format(lost=lost[0], seen=lost[1])
     if gated_note:
         notes.append(gated_note)
     if len(obs) == 0:
@@ -366,8 +386,10 @@ def sync(session: Session | str | os.PathLike[str],
         # with false candidates (a distractor) the failure may be theirs, not the ball's
         # motion's; say so
         several = int((detections.candidates_per_frame() > 1).sum())
-        if not several:
+        if not several or isinstance(exc, ClockSpanError):
             raise
+        if lost:  # (the gating's loss, said)
+            raise FusionError(f"{exc}; note: {gated_note.split('; ', 1)[1]}") from None
         raise FusionError(f"{exc}; note: {several} of {detections.n_frames} frames hold "
                           f"several candidates and a false one the gating kept (a "
                           f"reflection, a second ball) may be the cause") from None
@@ -396,20 +418,45 @@ def _prior_estimated(metadata) -> bool:
         return False
 
 
+#: share of the frames with a candidate that losing every candidate to sync's gating (at the
+#: logged clocks) says the clocks are likely too far apart for it (walk39: 0.3 % on one clock,
+#: 39 % with one camera's clock 30 ms off)
+LOST_FRAMES_SHARE = 0.2
+_LOST_NOTE = ("{lost} of {seen} frames with a candidate lost every one, the ball's too: the "
+              "cameras' logged clocks are likely further apart than the gate allows (a few "
+              "ms), and the clocks estimated from what is left may be wrong: give each "
+              "camera's approximate clock_offset (seconds) in the rig, where pslog sync "
+              "starts (docs/timing.md)")
+
+
 def _ball_candidates(detections: Detections, rig: Rig):
     """Each frame's ball at its LOGGED time: the best-scored candidate when no frame holds
     more than one, else the one the gating stage chooses (:func:`pslog.fusion.gating.gate`,
     offline, at the rig's clocks: its epipolar gate allows for the ball's motion between
     shutters, so clocks wrong by some milliseconds still pass the ball and stop a static
-    second object or a reflection), and a note saying how many candidates it rejected."""
+    second object or a reflection), a note saying how many candidates it rejected, and
+    ``(lost, seen)`` when more than :data:`LOST_FRAMES_SHARE` of the ``seen`` frames with a
+    candidate lost every one (clocks further apart than the gate allows), else None."""
     if not np.any(detections.candidates_per_frame() > 1) or len(rig) < 2:
-        return detections.best(), None
+        return detections.best(), None, None
     from .fusion.gating import gate
+    from .records import point_keys
 
     gated = gate(detections, rig, causal=False)
+    kept = gated.kept(detections)
     note = (f"{len(gated.rejections)} of {len(gated.chosen)} candidates rejected by gating "
             f"(the ball chosen among each frame's candidates, as `pslog fuse` does)")
-    return gated.kept(detections).best(), note
+    per_frame = detections.candidates_per_frame()
+    seen = per_frame > 0
+    # (frames lost to the epipolar gate: a static object alone in a frame, the ball missed,
+    # goes for motion; the ball at clocks too far apart, for epipolar)
+    lost = gated.rejections.frames_lost_to_epipolar(
+        point_keys(detections.frame_time_ns, detections.frame_camera), per_frame)
+    # (walk39: two hosts' clocks 30 ms, 0.25 s, 3 s apart: 39, 87, 90 % of the frames lost,
+    # the ball's own detections, against 0.3 % on one clock; the offsets written then 0.4 ms
+    # (3.5 σ), 206 ms and 3 s wrong, with a clean-looking table)
+    far = lost > LOST_FRAMES_SHARE * np.count_nonzero(seen)
+    return kept.best(), note, (lost, int(np.count_nonzero(seen))) if far else None
 
 
 def _from_session_start(detections: Detections) -> tuple[Detections, int]:

@@ -27,7 +27,7 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from pslog import progress
-    from pslog.errors import InputError
+    from pslog.errors import InputError, shell_word
     from pslog.evaluation import (
         all_rejection_counts,
         assess,
@@ -94,7 +94,10 @@ def run(args: argparse.Namespace) -> int:
         if truth is None:
             print(f"{args.session} has no ground truth (only sessions of 'pslog simulate', "
                   f"'pslog record --synthetic' and 'pslog demo' have one; 'pslog live "
-                  f"--synthetic' records none): no accuracy; the quality figures without it")
+                  f"--synthetic' records none): no accuracy; the quality figures without it "
+                  f"(to compare with a truth of your own, e.g. motion capture: 'pslog "
+                  f"export {shell_word(args.session)} --csv TRACKS.csv', the original times, "
+                  f"or --tum DIR for evo_ape: docs/interchange.md)")
         else:
             print(format_accuracy_table([r for r in rows if r is not None]))
         print()

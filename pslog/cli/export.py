@@ -117,7 +117,25 @@ def run(args: argparse.Namespace) -> int:
                 os.rmdir(args.tum)
         raise
     print(said.getvalue(), end="")
+    _say_session_clock(session, args)
     return 0
+
+
+def _say_session_clock(session, args: argparse.Namespace) -> None:
+    """One line when a session with a clock origin (times imported on another clock, e.g.
+    Unix-epoch) goes out in a format that keeps the session clock (TUM, JSON lines, Parquet,
+    C3D) while ``--detections`` and ``--csv`` give the original times back: a user comparing
+    the TUM file with a truth of theirs on that clock found no pose in common (walk39)."""
+    from pslog.log.csvio import format_time, session_clock_origin
+
+    origin = session_clock_origin(session.metadata, session.path)
+    kept = [f"--{name} {path}" for name, path in (("tum", args.tum), ("jsonl", args.jsonl),
+                                                    ("parquet", args.parquet), ("c3d", args.c3d))
+            if path]
+    if origin and kept:
+        print(f"note: {', '.join(kept)}: times on the session clock, whose origin is "
+              f"{format_time(origin)} s on the imported one (original time = session time + "
+              f"origin; --csv and --detections write the original times)")
 
 
 def _export_detections(session, path: str, force: bool) -> None:

@@ -7,16 +7,31 @@ import argparse
 from ._common import add_force, add_rig, declare_files
 
 
+class _OneCsv(argparse.Action):
+    """``--detections`` given once: a second one silently replaced the first (walk39: one
+    CSV per camera, ``--detections left.csv --detections right.csv``, imported the right
+    camera's alone and said "2 cameras")."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        before = getattr(namespace, self.dest, None)
+        if before is not None:
+            parser.error(f"argument --detections: given twice ({before}, {values}): pslog "
+                         f"import reads one CSV holding every camera's rows (column camera); "
+                         f"join the cameras' files into one first (docs/log-format.md)")
+        setattr(namespace, self.dest, values)
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from pslog.rig import TIMING_PRESETS
 
     add_rig(parser)
-    parser.add_argument("--detections", required=True, metavar="DET.csv",
+    parser.add_argument("--detections", required=True, metavar="DET.csv", action=_OneCsv,
                         help="detections CSV, header camera,time,u,v (optional frame,score); "
                              "time in seconds on any clock common to the cameras (negative or "
                              "Unix-epoch too: the session records its origin and 'pslog "
-                             "export' gives the times back), pixels as detected; rows in any "
-                             "order; a row with u and v empty: a frame without a detection")
+                             "export --detections / --csv' give the times back), pixels as "
+                             "detected; rows in any order; a row with u and v empty: a "
+                             "frame without a detection")
     parser.add_argument("--timing", default="rig", choices=(*TIMING_PRESETS, "rig"),
                         help="set the rig's shutter offsets from a preset (default: 'rig', the "
                              "rig's own offsets); the session's timing label names the preset "
@@ -59,4 +74,37 @@ def run(args: argparse.Namespace) -> int:
           f"({', '.join(rig.names)})"
           + (f"; session clock origin {format_time(origin_ns)} s (the CSV's times = session "
              f"times + origin)" if origin_ns else ""))
+    apart = _apart_in_time(detections)
+    if apart is not None:
+        print(apart)
+    unseen = [name for c, name in enumerate(rig.names)
+              if not (detections.frame_camera == c).any()]
+    if unseen:  # (a rig camera without a row: its CSV left out?)
+        print(f"note: {args.detections} has no frame of camera{'s' if len(unseen) > 1 else ''} "
+              f"{', '.join(unseen)}: nothing of {'them' if len(unseen) > 1 else 'it'} to fuse")
     return 0
+
+
+def _apart_in_time(detections) -> str | None:
+    """A note when some camera's frames do not overlap another's in time: the CSV's times
+    are then not on one clock (e.g. each camera's own clock, years apart: walk39's import
+    wrote a "session" of 56 years, and pslog sync blamed false candidates)."""
+    import numpy as np
+
+    from pslog.log.csvio import format_time
+
+    times, cams = detections.frame_time_ns, detections.frame_camera
+    names = detections.camera_names
+    spans = sorted((int(times[cams == c].min()), int(times[cams == c].max()), names[c])
+                   for c in range(len(names)) if np.any(cams == c))
+    end, before = spans[0][1], spans[0][2]  # (the latest end so far, and its camera)
+    for start, stop, after in spans[1:]:
+        if start > end:  # (a gap in time no camera spans: nothing across it is fused)
+            return (f"note: camera {after}'s frames start {format_time(start - end)} s after "
+                    f"camera {before}'s end: the times of the cameras do not overlap, they are "
+                    f"not on one clock; nothing can be fused until they are ('pslog sync' "
+                    f"searches each clock's offset within half a frame period, "
+                    f"--search-ms widens it): shift a camera's times in the CSV")
+        if stop > end:
+            end, before = stop, after
+    return None

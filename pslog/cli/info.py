@@ -130,7 +130,9 @@ def _text(info: dict) -> list[str]:
         from pslog.log.csvio import format_time
 
         lines.append(f"  session clock origin {format_time(info['clock_origin_ns'])} s "
-                     f"(original times = session times + origin; 'pslog export' adds it)")
+                     f"(original times = session times + origin; 'pslog export' "
+                     f"--detections and --csv add it, its other formats keep the session "
+                     f"clock)")
     tracks = ", ".join(f"{m} ({n} points)" for m, n in info["tracks"].items()) or "none"
     lines.append(f"  truth: {'yes' if info['truth'] else 'no'}; tracks: {tracks}; "
                  f"events: {info['events']} (the recorder's notes, topic /events, e.g. a "

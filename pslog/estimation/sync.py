@@ -1042,6 +1042,11 @@ def _pair_cost(sub, rig, c, unknowns, theta, j, value, params, options) -> float
     return solver.cost(control, r, 1.0)  # a fixed σ: costs comparable across trials
 
 
+class ClockSpanError(FusionError):
+    """A camera's detections do not overlap camera 1's in time: the cameras' times are not
+    on one clock (the cause is the times, not false candidates)."""
+
+
 def _check_coverage(obs: Observations, rig: Rig, max_gap_s: float) -> None:
     """A one-line :class:`FusionError` naming the camera that is seen too little with camera
     1 to be synced."""
@@ -1057,6 +1062,17 @@ def _check_coverage(obs: Observations, rig: Rig, max_gap_s: float) -> None:
         j = np.clip(np.searchsorted(first, mine), 1, len(first) - 1)
         near = np.minimum(np.abs(first[j] - mine), np.abs(first[j - 1] - mine))
         shared = int(np.count_nonzero(near <= max_gap_s * NS))
+        if shared < MIN_DETECTIONS and (mine[0] > first[-1] or mine[-1] < first[0]):
+            # (walk39: two cameras each stamped by its own clock, times years apart; the
+            # "shared" count and the caller's note on false candidates hid the cause)
+            raise ClockSpanError(
+                f"camera {rig.cameras[c].name}'s detections (t = {mine[0] / NS:.3f} .. "
+                f"{mine[-1] / NS:.3f} s on the session clock) and camera "
+                f"{rig.cameras[0].name}'s ({first[0] / NS:.3f} .. {first[-1] / NS:.3f} s) "
+                f"do not overlap in time: their times are not on one clock; put the "
+                f"cameras' times on one clock first (e.g. shift camera "
+                f"{rig.cameras[c].name}'s), as close as you can: pslog sync searches each "
+                f"offset within half a frame period (--search-ms widens it)")
         if shared < MIN_DETECTIONS:
             raise FusionError(f"camera {rig.cameras[c].name} has {shared} detections within "
                               f"{max_gap_s * 1e3:g} ms of one of camera {rig.cameras[0].name}"

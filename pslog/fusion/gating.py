@@ -206,6 +206,27 @@ class Rejections:
         found = np.bincount(self.reason, minlength=len(REASONS))
         return {name: int(found[i]) for i, name in enumerate(REASONS)}
 
+    def frames_lost_to_epipolar(self, frame_keys: np.ndarray,
+                                per_frame: np.ndarray) -> int:
+        """How many frames lost every candidate, one of them to the epipolar gate: the
+        ball's own detections when the cameras' clocks are further apart than the gate
+        allows (walk39), where a static object alone in a frame is rejected for ``motion``.
+
+        Parameters
+        ----------
+        frame_keys : (F,) int64, the session's frames' :func:`pslog.records.point_keys`
+            (logged time, camera), unique
+        per_frame : (F,) int, each frame's number of candidates
+        """
+        from ..records import matching_rows, point_keys
+
+        keys = point_keys(self.frame_time_ns, self.camera)
+        frames, count = np.unique(keys, return_counts=True)
+        rows, found = matching_rows(frames, frame_keys)
+        whole = found & (count == np.asarray(per_frame)[rows])
+        return int(np.count_nonzero(whole & np.isin(frames,
+                                                    keys[self.reason == EPIPOLAR])))
+
     @classmethod
     def empty(cls) -> Rejections:
         return cls(np.zeros(0, np.int64), np.zeros(0, np.int32), np.zeros(0, np.int64),
