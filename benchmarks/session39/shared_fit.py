@@ -29,7 +29,7 @@ from pslog.fusion import FusionOptions, _type_a, offline_confirmation, type_a_pr
 from pslog.fusion._prepare import default_max_gap_s, prepare  # noqa: E402
 from pslog.fusion.breaks import fit_breaks_ns, reversed_prepared, spans_break  # noqa: E402
 from pslog.fusion.gating import gate_for, prepared_for  # noqa: E402
-from pslog.fusion.smooth import _confirmed, _fit  # noqa: E402
+from pslog.fusion.smooth import session_fit  # noqa: E402
 from pslog.records import Observations, matching_rows, point_keys  # noqa: E402
 from pslog.simulation import SimulationOptions, simulate_labelled  # noqa: E402
 
@@ -40,22 +40,7 @@ def smooth_breaks(det, rig, opt):
     """smooth's fit as fuse_smooth makes it (offline gate, doubted choices left out unless the
     fit predicts them): its breaks (ns)."""
     gated = gate_for(det, rig, "smooth", opt)
-    prep = prepared_for(gated, rig)
-    obs = prep.obs
-    doubted = None if prep.doubt_px2 is None else prep.doubt_px2 > 0
-    if doubted is not None and not np.any(doubted):
-        doubted = None
-    if doubted is None:
-        fit = _fit(obs, rig, opt)
-    else:
-        kept = ~doubted
-        fit = _fit(obs.select(kept), rig, opt)
-        if fit is not None:
-            rows = np.flatnonzero(doubted)
-            confirmed = rows[_confirmed(fit.trajectory, obs, rows, rig)]
-            if len(confirmed):
-                kept[confirmed] = True
-                fit = _fit(obs.select(kept), rig, opt)
+    fit = session_fit(prepared_for(gated, rig), rig, opt)[0]
     if fit is None:
         return np.zeros(0, np.int64)
     tr = fit.trajectory

@@ -55,27 +55,7 @@ from ._prepare import Prepared
 def fuse_smooth(prep: Prepared, rig: Rig, options) -> Track:
     """The ``smooth`` track of prepared observations (``options``: FusionOptions with
     ``max_gap_s`` set). An empty track when no stretch is seen by two cameras."""
-    obs = prep.obs
-    # a choice the gate put in doubt is left out, as the filter leaves it out (with chance
-    # 1/2 metres from the ball, and the fit's covariance cannot say so: docs/methods.md,
-    # "A contested start"), unless the fit made without it predicts it (`_confirmed`)
-    doubted = None if prep.doubt_px2 is None else prep.doubt_px2 > 0
-    if doubted is not None and not np.any(doubted):
-        doubted = None
-    n_doubt = 0
-    if doubted is None:
-        fit = _fit(obs, rig, options)
-    else:
-        kept = ~doubted
-        fit = _fit(obs.select(kept), rig, options)
-        if fit is not None:
-            rows = np.flatnonzero(doubted)
-            confirmed = rows[_confirmed(fit.trajectory, obs, rows, rig)]
-            if len(confirmed):
-                kept[confirmed] = True
-                fit = _fit(obs.select(kept), rig, options)
-        n_doubt = len(obs) - int(np.count_nonzero(kept))
-        obs = obs.select(kept)
+    fit, obs, n_doubt = session_fit(prep, rig, options)
     if fit is None:
         return _empty()
     rejected_all = fit.rejected  # (n,) the detections the fit rejected (Fit.rejected)
@@ -122,6 +102,31 @@ def fuse_smooth(prep: Prepared, rig: Rig, options) -> Track:
     if n_doubt:
         dropped["doubt"] = n_doubt
     return Track("smooth", time_ns, position, camera, quality, dropped=dropped)
+
+
+def session_fit(prep: Prepared, rig: Rig, options):
+    """``smooth``'s fit of prepared observations (``options``: FusionOptions with
+    ``max_gap_s`` set), the observations it fitted and how many choices in doubt it left
+    out: ``(fit or None, observations, n_doubt)``. A choice the gate put in doubt is left
+    out, as the filter leaves it out (with chance 1/2 metres from the ball, and the fit's
+    covariance cannot say so: docs/methods.md, "A contested start"), unless the fit made
+    without it predicts it (:func:`_confirmed`); None when no stretch is seen by two
+    cameras."""
+    obs = prep.obs
+    doubted = None if prep.doubt_px2 is None else prep.doubt_px2 > 0
+    if doubted is not None and not np.any(doubted):
+        doubted = None
+    if doubted is None:
+        return _fit(obs, rig, options), obs, 0
+    kept = ~doubted
+    fit = _fit(obs.select(kept), rig, options)
+    if fit is not None:
+        rows = np.flatnonzero(doubted)
+        confirmed = rows[_confirmed(fit.trajectory, obs, rows, rig)]
+        if len(confirmed):
+            kept[confirmed] = True
+            fit = _fit(obs.select(kept), rig, options)
+    return fit, obs.select(kept), len(obs) - int(np.count_nonzero(kept))
 
 
 def _fit(obs: Observations, rig: Rig, options):
