@@ -42,7 +42,7 @@ class BadOption(InputError):
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from pslog.camera import MAX_FPS, MAX_IMAGE_SIZE
+    from pslog.camera import MAX_FPS, MAX_IMAGE_SIZE, MIN_FPS
     from pslog.cli._common import camera_name, chessboard, int_in, number_at_most, positive_int
     parser.epilog = ("examples:\n"
                      "  pslog calibrate --points pts.csv --name cam1 --width 640 --height 480 "
@@ -68,8 +68,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "against the images with --chessboard)")
     parser.add_argument("--height", type=size, metavar="PX", help="image height, "
                         "pixels (as --width)")
+    # (a rate below the rig's least was refused by the rig, exit 1, one above its most by
+    # this, exit 2: both are usage errors)
     parser.add_argument("--fps", type=number_at_most(MAX_FPS, "fps", "beyond any camera",
-                                                     positive=True),
+                                                     positive=True, least=MIN_FPS),
                         metavar="FPS", help="frame rate, frames per second (default: the "
                                             "rig's value for this camera, else 30)")
     parser.add_argument("--offset", type=nonnegative_float,
