@@ -85,10 +85,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="with --points: distortion terms to estimate (default "
                              "%(default)s: none below 10 points, k1,k2 below 100, all five from "
                              "100)")
+    # (the library's bounds, pslog.calibration.chessboard's: 1e-30 was OpenCV's assertion)
     parser.add_argument("--square", type=number_at_most(1.0, "m", "no board's square is "
-                                                                  "larger", positive=True),
-                        default=0.025, metavar="M", help="chessboard square side, metres, at "
-                                                         "most 1 (default %(default)s)")
+                                                                  "larger", positive=True,
+                                                        least=1e-4),
+                        default=0.025, metavar="M", help="chessboard square side, metres, "
+                                                         "0.0001 to 1 (default %(default)s)")
     parser.add_argument("--images", metavar="DIR_OR_VIDEO",
                         help="with --chessboard: folder of images or a video file")
     parser.add_argument("--max-frames", type=positive_int, default=60,

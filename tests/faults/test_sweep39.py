@@ -10,7 +10,10 @@ other command says the file may still be recording. ``FusionOptions(noise_px=1e-
 every typeA point a NaN std_m (``pslog fuse`` refuses that noise). ``pslog.fuse`` took
 ``clock_uncertainty="off"`` for on, and a wrong ``rig`` or ``options`` type, like
 ``pslog.read_session(123)``, was an AttributeError or TypeError from deep inside.
-``pslog calibrate --fps 0.05`` was exit 1 where ``--fps 1e308`` is exit 2."""
+``pslog calibrate --fps 0.05`` was exit 1 where ``--fps 1e308`` is exit 2; ``--chessboard 2x3``
+a cv2.error traceback, ``99999x99999`` "out of memory: Unable to allocate 112. GiB", ``--square
+1e-30`` OpenCV's assertion text. ``pslog fuse --max-gap-ms`` below the frame period made no
+point, "too few detections close enough in time", the option unnamed."""
 
 from __future__ import annotations
 
@@ -190,3 +193,40 @@ def test_a_max_gap_below_the_frame_period_is_named_when_no_point_is_made(inputs,
     assert f"no point from typeA: too few detections close enough in time ({why}" in run.stdout
     assert not out.exists()
     assert_untouched(before, inputs)
+
+
+@pytest.mark.parametrize("args, says", [
+    (("--chessboard", "2x3"), "bad chessboard pattern '2x3': each side needs 3 to 1000"),
+    (("--chessboard", "9x2"), "bad chessboard pattern '9x2': each side needs 3 to 1000"),
+    (("--chessboard", "99999x99999"), "'99999x99999': each side needs 3 to 1000"),
+    (("--chessboard", "9x6", "--square", "1e-30"), "--square: must be at least 0.0001 m")])
+def test_a_chessboard_no_camera_can_see_is_a_usage_error(tmp_path, args, says):
+    """2x3: a cv2.error traceback (OpenCV's corner finder needs more than 2 a side);
+    99999x99999: 'out of memory: Unable to allocate 112. GiB' (its board points); a square of
+    1e-30 m: OpenCV's assertion text ('matH0.size() == Size(3, 3)')."""
+    import cv2
+
+    shots = tmp_path / "shots"
+    shots.mkdir()
+    cv2.imwrite(str(shots / "view.png"), np.full((480, 640), 128, np.uint8))
+    before = fingerprint(tmp_path)
+    run = run_pslog("calibrate", *args, "--images", "shots", "--name", "cam9", "--rig",
+                    "rig.toml", cwd=tmp_path)
+    assert_one_line_error(run, 2, contains=says)
+    assert_untouched(before, tmp_path)
+
+
+@pytest.mark.parametrize("pattern, square, says", [
+    ((2, 6), 0.025, "bad chessboard pattern (2, 6): each side needs 3 to 1000"),
+    ((9, 6.5), 0.025, "bad chessboard pattern (9, 6.5): expected COLSxROWS"),
+    ((9, 6), 1e-30, "chessboard square 1e-30 m: give its side in [0.0001, 1] metres"),
+    ((9, 6), float("nan"), "chessboard square nan m")])
+def test_calibrate_chessboard_names_a_pattern_or_square_out_of_bounds(pattern, square, says):
+    """The library entry point, before any image is searched (a blank image: before, 'no 9x6
+    chessboard found' or the cv2.error of a 2-corner side)."""
+    from pslog.calibration import calibrate_chessboard
+
+    blank = np.full((480, 640), 128, np.uint8)
+    with pytest.raises(InputError) as caught:
+        calibrate_chessboard([blank] * 3, pattern, square)
+    assert says in str(caught.value)
