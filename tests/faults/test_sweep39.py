@@ -13,7 +13,8 @@ every typeA point a NaN std_m (``pslog fuse`` refuses that noise). ``pslog.fuse`
 ``pslog calibrate --fps 0.05`` was exit 1 where ``--fps 1e308`` is exit 2; ``--chessboard 2x3``
 a cv2.error traceback, ``99999x99999`` "out of memory: Unable to allocate 112. GiB", ``--square
 1e-30`` OpenCV's assertion text. ``pslog fuse --max-gap-ms`` below the frame period made no
-point, "too few detections close enough in time", the option unnamed."""
+point, "too few detections close enough in time", the option unnamed. ``NUMBA_NUM_THREADS=0
+pslog fuse`` was a traceback: another thread's import of a kernel module half imported."""
 
 from __future__ import annotations
 
@@ -230,3 +231,17 @@ def test_calibrate_chessboard_names_a_pattern_or_square_out_of_bounds(pattern, s
     with pytest.raises(InputError) as caught:
         calibrate_chessboard([blank] * 3, pattern, square)
     assert says in str(caught.value)
+
+
+def test_numba_refusing_to_start_under_fuses_threads_is_one_line(inputs, tmp_path):
+    """``NUMBA_NUM_THREADS=0 pslog fuse``: the methods' threads import the kernel modules at
+    once; the first import fails in pslog's words ("numba could not start"), and another
+    thread, meeting that module half imported, raised "ImportError: cannot import name
+    '_prepare_kernel'", the error reported (a traceback). ``--workers 1``, ``sync`` and
+    ``view`` said it in one line already."""
+    before = fingerprint(inputs)
+    out = tmp_path / "fused.mcap"
+    run = run_pslog("fuse", inputs / "s.mcap", "-o", out, env={"NUMBA_NUM_THREADS": "0"})
+    assert_one_line_error(run, 1, contains=("numba could not start", "NUMBA_"))
+    assert not out.exists() and not list(tmp_path.iterdir())
+    assert_untouched(before, inputs)
