@@ -14,7 +14,8 @@ every typeA point a NaN std_m (``pslog fuse`` refuses that noise). ``pslog.fuse`
 a cv2.error traceback, ``99999x99999`` "out of memory: Unable to allocate 112. GiB", ``--square
 1e-30`` OpenCV's assertion text. ``pslog fuse --max-gap-ms`` below the frame period made no
 point, "too few detections close enough in time", the option unnamed. ``NUMBA_NUM_THREADS=0
-pslog fuse`` was a traceback: another thread's import of a kernel module half imported."""
+pslog fuse`` was a traceback: another thread's import of a kernel module half imported;
+``NUMBA_NUM_THREADS=abc`` numba's nine-line warning with a traceback's text."""
 
 from __future__ import annotations
 
@@ -245,3 +246,17 @@ def test_numba_refusing_to_start_under_fuses_threads_is_one_line(inputs, tmp_pat
     assert_one_line_error(run, 1, contains=("numba could not start", "NUMBA_"))
     assert not out.exists() and not list(tmp_path.iterdir())
     assert_untouched(before, inputs)
+
+
+def test_a_numba_variable_numba_cannot_parse_is_one_warning_line(inputs, tmp_path):
+    """``NUMBA_NUM_THREADS=abc``: numba warns and goes on with its default; its warning was
+    nine lines on stderr with a traceback's text among them, now one line of pslog's."""
+    out = tmp_path / "fused.mcap"
+    run = run_pslog("fuse", inputs / "s.mcap", "--method", "nearest", "-o", out,
+                    env={"NUMBA_NUM_THREADS": "abc"})
+    assert run.code == 0, run.stderr
+    assert "Traceback" not in run.stderr, run.stderr
+    assert run.stderr.splitlines() == [
+        "pslog fuse: warning: numba: environment variable 'NUMBA_NUM_THREADS' is defined but "
+        "its associated value 'abc' could not be parsed; numba takes its default instead"]
+    assert out.stat().st_size > 0
