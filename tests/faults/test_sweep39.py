@@ -15,7 +15,8 @@ a cv2.error traceback, ``99999x99999`` "out of memory: Unable to allocate 112. G
 1e-30`` OpenCV's assertion text. ``pslog fuse --max-gap-ms`` below the frame period made no
 point, "too few detections close enough in time", the option unnamed. ``NUMBA_NUM_THREADS=0
 pslog fuse`` was a traceback: another thread's import of a kernel module half imported;
-``NUMBA_NUM_THREADS=abc`` numba's nine-line warning with a traceback's text."""
+``NUMBA_NUM_THREADS=abc`` numba's nine-line warning with a traceback's text. ``pslog import``
+of a detections CSV in milliseconds went through: 33 s between a 30 fps camera's frames."""
 
 from __future__ import annotations
 
@@ -260,3 +261,40 @@ def test_a_numba_variable_numba_cannot_parse_is_one_warning_line(inputs, tmp_pat
         "pslog fuse: warning: numba: environment variable 'NUMBA_NUM_THREADS' is defined but "
         "its associated value 'abc' could not be parsed; numba takes its default instead"]
     assert out.stat().st_size > 0
+
+
+@pytest.mark.parametrize("scale, ratio", [
+    (1000, "1000 times its 33.33 ms frame period at 30 fps: the time column is seconds "
+           "(milliseconds: divide them by 1000)"),
+    (1e6, "1000000 times its 33.33 ms frame period at 30 fps: the time column is seconds "
+          "(microseconds: divide them by 1e6)")])
+def test_a_detections_csv_in_milliseconds_is_refused_naming_the_unit(inputs, tmp_path, scale,
+                                                                     ratio):
+    """A detector's log in milliseconds (or microseconds) imported without a word: each
+    camera's frames 33 s apart in a 30 fps rig, and ``pslog fuse`` then said only "too few
+    detections close enough in time"."""
+    exported = tmp_path / "det.csv"
+    assert run_pslog("export", inputs / "s.mcap", "--detections", exported).code == 0
+    lines = exported.read_text().splitlines()
+    header = lines[0].split(",")
+    at = header.index("time")
+    scaled = [lines[0]]
+    for line in lines[1:]:
+        cells = line.split(",")
+        cells[at] = repr(float(cells[at]) * scale)
+        scaled.append(",".join(cells))
+    wrong = tmp_path / "det_ms.csv"
+    wrong.write_text("\n".join(scaled) + "\n")
+    before = fingerprint(tmp_path)
+    run = run_pslog("import", "--rig", "paper3", "--timing", "typeA", "--detections", wrong,
+                    "-o", tmp_path / "s.mcap")
+    assert_one_line_error(run, 1, contains=(
+        f"{wrong}: camera cam1's frames are", ratio))
+    assert_untouched(before, tmp_path)
+    # the same CSV in seconds, every third frame of each camera left out: imported
+    kept = [lines[0]] + [line for i, line in enumerate(lines[1:]) if (i // 3) % 3 == 0]
+    sparse = tmp_path / "sparse.csv"
+    sparse.write_text("\n".join(kept) + "\n")
+    run = run_pslog("import", "--rig", "paper3", "--timing", "typeA", "--detections", sparse,
+                    "-o", tmp_path / "s.mcap")
+    assert run.code == 0, run.stderr
