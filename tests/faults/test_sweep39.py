@@ -16,7 +16,8 @@ a cv2.error traceback, ``99999x99999`` "out of memory: Unable to allocate 112. G
 point, "too few detections close enough in time", the option unnamed. ``NUMBA_NUM_THREADS=0
 pslog fuse`` was a traceback: another thread's import of a kernel module half imported;
 ``NUMBA_NUM_THREADS=abc`` numba's nine-line warning with a traceback's text. ``pslog import``
-of a detections CSV in milliseconds went through: 33 s between a 30 fps camera's frames."""
+of a detections CSV in milliseconds went through: 33 s between a 30 fps camera's frames.
+``pslog live --out`` at its own ``--listen`` address sent every point back to itself."""
 
 from __future__ import annotations
 
@@ -298,3 +299,24 @@ def test_a_detections_csv_in_milliseconds_is_refused_naming_the_unit(inputs, tmp
     run = run_pslog("import", "--rig", "paper3", "--timing", "typeA", "--detections", sparse,
                     "-o", tmp_path / "s.mcap")
     assert run.code == 0, run.stderr
+
+
+@pytest.mark.parametrize("listen_host, out_host", [("127.0.0.1", "127.0.0.1"),
+                                                   ("0.0.0.0", "localhost")])
+def test_live_refuses_to_send_its_points_to_its_own_listen_address(tmp_path, listen_host,
+                                                                   out_host):
+    """``--out`` equal to ``--listen`` (or to any local address a wildcard bind takes): the
+    points came back to the fuser, counted as foreign datagrams, none to a robot, and the
+    run ended with exit 0."""
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    run = run_pslog("live", "--rig", "paper3", "--synthetic", "--duration", "1",
+                    "--listen", f"udp://{listen_host}:{port}",
+                    "--out", f"udp://{out_host}:{port}", "--record", tmp_path / "live.mcap")
+    assert_one_line_error(run, 1, contains=(
+        f"--out udp://{out_host}:{port} is where pslog live listens "
+        f"(udp://{listen_host}:{port})", "give the robot's address"))
+    assert list(tmp_path.iterdir()) == []
