@@ -53,9 +53,12 @@ def read_session(path: str | os.PathLike[str]) -> Session:
     Raises
     ------
     pslog.errors.InputError, pslog.errors.LogFormatError : missing, unreadable or not a session
+        (or ``path`` not a file name)
     """
     from .log import read_session as _read
 
+    if not isinstance(path, (str, os.PathLike)):  # (a TypeError from deep inside, before)
+        raise InputError(f"read_session: path {path!r:.60}: give a file name (str or Path)")
     return _read(path)
 
 
@@ -146,7 +149,8 @@ def fuse(session: Session | str | os.PathLike[str] | Detections,
     Raises
     ------
     pslog.errors.FusionError : unknown method, fewer than two cameras, no detection
-    pslog.errors.InputError : ``methods`` empty or not names
+    pslog.errors.InputError : ``methods`` empty or not names; ``rig``, ``options`` or
+        ``clock_uncertainty`` not of a type named above
     pslog.errors.RigError : a rig whose cameras differ from the session's, or a bad rig file
     """
     from . import progress
@@ -161,6 +165,13 @@ def fuse(session: Session | str | os.PathLike[str] | Detections,
     from .rig import Rig, check_baselines, resolve_rig
 
     names = _names(methods, "methods")
+    # (each an AttributeError from inside before; clock_uncertainty="off" was taken as on)
+    if rig is not None and not isinstance(rig, (Rig, str, os.PathLike)):
+        raise InputError(f"rig {rig!r:.60}: give a Rig, a built-in rig's name or a rig file")
+    if options is not None and not isinstance(options, FusionOptions):
+        raise InputError(f"options {options!r:.60}: give a pslog.fusion.FusionOptions")
+    if not isinstance(clock_uncertainty, bool):
+        raise InputError(f"clock_uncertainty {clock_uncertainty!r:.60}: give True or False")
     if isinstance(session, Detections):
         if rig is None:
             raise InputError("fuse(detections): give the rig the detections belong to")
@@ -262,6 +273,8 @@ def sync(session: Session | str | os.PathLike[str],
     Raises
     ------
     pslog.errors.FusionError : no detection, or the estimate failed (with the likely cause)
+    pslog.errors.InputError : ``estimate``, ``search_s`` or ``regularize`` not a value named
+        above (``search_s``: seconds in [1e-9, 60])
     """
     from . import progress
     from .estimation.sync import (
@@ -270,6 +283,7 @@ def sync(session: Session | str | os.PathLike[str],
         RIG_KEY,
         SHARED_READOUT,
         ClockSpanError,
+        check_search_s,
         estimate_clocks,
     )
     from .rig import check_baselines
@@ -293,9 +307,10 @@ def sync(session: Session | str | os.PathLike[str],
         raise InputError(f"estimate {estimate!r}: 'auto', or name parameters among "
                          f"{', '.join(PARAMETERS)} (not {', '.join(map(repr, bad))})")
     estimate = wanted_params
-    read = _session(session)
+    search_s = check_search_s(search_s)  # (before the session is read)
     if regularize not in ("auto", "on", "off"):
         raise InputError(f"regularize {regularize!r}: auto, on or off")
+    read = _session(session)
     # a synced copy synced again: from the clock model recorded before its first sync (its
     # estimates are this data's, not known values: docs/timing.md, "Syncing a synced copy")
     # (only the parameters this sync estimates, or auto tests: one it does not keeps the

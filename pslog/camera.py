@@ -37,6 +37,12 @@ MAX_CLOCK_OFFSET_S = 86400.0
 #: Largest clock drift accepted, ppm: quartz oscillators are within ±100 ppm; 1000 ppm
 #: (1 ms per second) is beyond any working clock.
 MAX_CLOCK_DRIFT_PPM = 1000.0
+#: Least non-zero pixel noise a fusion may assume (``FusionOptions.noise_px``, ``pslog fuse
+#: --noise-px``): a tenth of the finest detectors' sub-pixel precision (~0.01 px). Below it
+#: std_m is under a micrometre at any rig's scale, and the squares behind the covariances
+#: underflow (every typeA point's std_m NaN at 1e-155 px; sync's NEES a 40-digit number at
+#: 1e-8).
+MIN_FUSE_NOISE_PX = 1e-3
 #: Characters a camera name may not hold: names are CSV cells (``,`` ``"``) and parts of MCAP
 #: topics ``/camera/<name>/...`` (``/``).
 _NAME_FORBIDDEN = ',"/'

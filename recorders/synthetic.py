@@ -12,7 +12,7 @@ from pslog.errors import InputError
 from pslog.motion import BALL_RADIUS, Motion, get_motion
 from pslog.records import NS, Truth
 from pslog.rig import TIMING_PRESETS, Rig, apply_timing, timing_label
-from pslog.simulation import check_exposure
+from pslog.simulation import check_duration, check_exposure
 
 from .detect import HsvRange
 from .record import RecordSummary, StopRequest, record
@@ -59,7 +59,7 @@ def record_synthetic(
         (:class:`recorders.live.LoggedClockPosition`)
     motion : a :class:`pslog.motion.Motion` (its ``position`` a module-level function) or
         the name of one of :data:`pslog.motion.MOTIONS`
-    duration : seconds (default: the motion's natural duration)
+    duration : seconds, at least a frame period (default: the motion's natural duration)
     fast : render as fast as possible (False: in real time, like cameras)
     timing : ``sync``, ``typeA`` or ``typeB`` to apply that preset to the rig first; None
         keeps the rig's offsets (the metadata names the matching preset, else ``custom``)
@@ -79,8 +79,10 @@ def record_synthetic(
             raise InputError(f"unknown timing {timing!r} (have {', '.join(TIMING_PRESETS)})")
         rig = apply_timing(rig, timing)
     duration = motion.duration if duration is None else float(duration)
-    if not (np.isfinite(duration) and duration > 0):
-        raise InputError(f"duration must be > 0 seconds, got {duration!r}")
+    # at least a frame period and not beyond a simulation's frames, as pslog record and
+    # simulate check (a shorter one recorded no file, and pslog demo then said 'no such
+    # file: session.mcap')
+    check_duration(rig, duration)
     options = render or RenderOptions(ball_radius=ball_radius, exposure_s=exposure_s,
                                       noise_sigma=noise_sigma, seed=seed)
     check_exposure(rig, options.exposure_s)  # a shutter open into the next frame is absurd

@@ -29,17 +29,54 @@ from ._common import (
 
 # ---- chessboard -------------------------------------------------------------------------------
 
+#: Fewest inner corners per side: OpenCV's corner finder needs more than 2 (a 2xN pattern
+#: was a cv2.error traceback).
+MIN_PATTERN_SIDE = 3
+#: Most inner corners per side: beyond any printed board (9x6 to 30x20); a 99999x99999
+#: pattern asked for a 112 GiB array of board points, said as "out of memory".
+MAX_PATTERN_SIDE = 1000
+#: Smallest square side, metres: 0.1 mm, below any printed board's (at 1e-30 m OpenCV's
+#: initial homography failed with its own assertion text).
+MIN_SQUARE_M = 1e-4
+#: Largest square side, metres: no board's square is larger.
+MAX_SQUARE_M = 1.0
+
+
+def check_pattern(pattern: object, text: object = None) -> tuple[int, int]:
+    """``pattern`` as (cols, rows) if both are whole numbers in [:data:`MIN_PATTERN_SIDE`,
+    :data:`MAX_PATTERN_SIDE`], else :class:`InputError` naming it (as ``text`` if given)."""
+    spelled = pattern if text is None else text
+    sides = tuple(pattern) if isinstance(pattern, (tuple, list)) else ()
+    if len(sides) != 2 or not all(isinstance(p, (int, np.integer)) and not isinstance(p, bool)
+                                  for p in sides):
+        raise InputError(f"bad chessboard pattern {spelled!r}: expected COLSxROWS of inner "
+                         f"corners, e.g. 9x6")
+    cols, rows = int(sides[0]), int(sides[1])
+    if not (MIN_PATTERN_SIDE <= min(cols, rows) and max(cols, rows) <= MAX_PATTERN_SIDE):
+        raise InputError(f"bad chessboard pattern {spelled!r}: each side needs "
+                         f"{MIN_PATTERN_SIDE} to {MAX_PATTERN_SIDE} inner corners")
+    return cols, rows
+
+
+def check_square(square: object) -> float:
+    """``square`` as metres if it is a number in [:data:`MIN_SQUARE_M`,
+    :data:`MAX_SQUARE_M`], else :class:`InputError` naming it."""
+    if (isinstance(square, bool) or not isinstance(square, (int, float, np.number))
+            or not MIN_SQUARE_M <= float(square) <= MAX_SQUARE_M):
+        raise InputError(f"chessboard square {square!r} m: give its side in "
+                         f"[{MIN_SQUARE_M:g}, {MAX_SQUARE_M:g}] metres")
+    return float(square)
+
 def parse_pattern(text: str) -> tuple[int, int]:
-    """``"9x6"`` -> ``(9, 6)``: inner corners per row and per column, each >= 2."""
+    """``"9x6"`` -> ``(9, 6)``: inner corners per row and per column, each in
+    [:data:`MIN_PATTERN_SIDE`, :data:`MAX_PATTERN_SIDE`] (:func:`check_pattern`)."""
     parts = str(text).lower().replace("×", "x").split("x")
     try:
         cols, rows = (int(p) for p in parts)
     except ValueError:
         raise InputError(f"bad chessboard pattern {text!r}: expected COLSxROWS of inner "
                          f"corners, e.g. 9x6") from None
-    if cols < 2 or rows < 2:
-        raise InputError(f"bad chessboard pattern {text!r}: need at least 2x2 inner corners")
-    return cols, rows
+    return check_pattern((cols, rows), text)
 
 
 def read_calibration_images(path: str | Path, *, max_frames: int = 60,
@@ -138,9 +175,11 @@ def calibrate_chessboard(
     images : sequence of (height, width) uint8 grayscale or (height, width, 3) BGR arrays,
         all the same size
     pattern : (cols, rows)
-        Inner corners per row and per column (a board of 10 x 7 squares is ``(9, 6)``).
+        Inner corners per row and per column (a board of 10 x 7 squares is ``(9, 6)``), each
+        3 to 1000.
     square : float
-        Side of a square, metres (scales only the per-view board poses, which are discarded).
+        Side of a square, metres, 1e-4 to 1 (scales only the per-view board poses, which are
+        discarded).
     name, fps, offset
         Copied into the camera.
     R, t : optional
@@ -153,12 +192,13 @@ def calibrate_chessboard(
     Raises
     ------
     InputError
-        No images, images of different sizes, or the board found in fewer than
-        :data:`MIN_CHESSBOARD_VIEWS` images.
+        No images, images of different sizes, the board found in fewer than
+        :data:`MIN_CHESSBOARD_VIEWS` images, or a pattern or square outside the bounds above.
     """
+    cols, rows = check_pattern(pattern)
+    square = check_square(square)
     if not images:
         raise InputError("no calibration images")
-    cols, rows = pattern
     grays = [_gray(im) for im in images]
     size = grays[0].shape
     for i, gray in enumerate(grays):

@@ -228,6 +228,28 @@ def _release_sigint() -> None:
             raise KeyboardInterrupt
 
 
+def _numba_warnings_in_one_line(name: str) -> None:
+    """numba's warning about a NUMBA_* variable it cannot parse (``NUMBA_NUM_THREADS=abc``:
+    nine lines on stderr, a traceback's text among them, as numba imports on any thread) as
+    one line in pslog's words: numba goes on with its default; every other warning as
+    Python shows it. Set once, before any thread starts."""
+    import warnings
+
+    shown = warnings.showwarning
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        text = str(message)
+        if (category is RuntimeWarning and text.startswith("Environment variable 'NUMBA_")
+                and "numba" in str(filename)):
+            first = text.splitlines()[0].rstrip(".")
+            print(f"pslog {name}: warning: numba: {first[0].lower()}{first[1:]}; numba takes "
+                  f"its default instead", file=sys.stderr)
+            return
+        shown(message, category, filename, lineno, file, line)
+
+    warnings.showwarning = show
+
+
 def _main(argv: list[str] | None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     commands = COMMANDS
@@ -262,6 +284,8 @@ def _main(argv: list[str] | None) -> int:
 
     def say(text: str) -> None:
         print(f"pslog {name}: {text}", file=sys.stderr)
+
+    _numba_warnings_in_one_line(name)
 
     real_stdout = sys.stdout  # None when started with standard output closed
     if real_stdout is not None:

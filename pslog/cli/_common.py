@@ -261,16 +261,12 @@ def noise_px(text: str) -> float:
     return value
 
 
-#: Least non-zero pixel noise a fusion may assume: a tenth of the finest detectors'
-#: sub-pixel precision (~0.01 px). Below it std_m is under a micrometre at any rig's
-#: scale, and the squares behind the covariances underflow (every typeA point's std_m NaN
-#: at 1e-155 px; sync's NEES a 40-digit number at 1e-8).
-MIN_FUSE_NOISE_PX = 1e-3
-
-
 def fuse_noise_px(text: str) -> float:
     """The detections' pixel noise a fusion assumes: 0 (noise-free, a zero covariance) or
-    in [:data:`MIN_FUSE_NOISE_PX`, :data:`MAX_NOISE_PX`]."""
+    in [:data:`pslog.camera.MIN_FUSE_NOISE_PX`, :data:`MAX_NOISE_PX`] (the rule of
+    :class:`pslog.fusion.FusionOptions`, refused here as a usage error)."""
+    from pslog.camera import MIN_FUSE_NOISE_PX
+
     value = noise_px(text)
     if 0 < value < MIN_FUSE_NOISE_PX:
         raise argparse.ArgumentTypeError(

@@ -42,7 +42,7 @@ class BadOption(InputError):
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from pslog.camera import MAX_FPS, MAX_IMAGE_SIZE
+    from pslog.camera import MAX_FPS, MAX_IMAGE_SIZE, MIN_FPS
     from pslog.cli._common import camera_name, chessboard, int_in, number_at_most, positive_int
     parser.epilog = ("examples:\n"
                      "  pslog calibrate --points pts.csv --name cam1 --width 640 --height 480 "
@@ -68,8 +68,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "against the images with --chessboard)")
     parser.add_argument("--height", type=size, metavar="PX", help="image height, "
                         "pixels (as --width)")
+    # (a rate below the rig's least was refused by the rig, exit 1, one above its most by
+    # this, exit 2: both are usage errors)
     parser.add_argument("--fps", type=number_at_most(MAX_FPS, "fps", "beyond any camera",
-                                                     positive=True),
+                                                     positive=True, least=MIN_FPS),
                         metavar="FPS", help="frame rate, frames per second (default: the "
                                             "rig's value for this camera, else 30)")
     parser.add_argument("--offset", type=nonnegative_float,
@@ -83,10 +85,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="with --points: distortion terms to estimate (default "
                              "%(default)s: none below 10 points, k1,k2 below 100, all five from "
                              "100)")
+    # (the library's bounds, pslog.calibration.chessboard's: 1e-30 was OpenCV's assertion)
     parser.add_argument("--square", type=number_at_most(1.0, "m", "no board's square is "
-                                                                  "larger", positive=True),
-                        default=0.025, metavar="M", help="chessboard square side, metres, at "
-                                                         "most 1 (default %(default)s)")
+                                                                  "larger", positive=True,
+                                                        least=1e-4),
+                        default=0.025, metavar="M", help="chessboard square side, metres, "
+                                                         "0.0001 to 1 (default %(default)s)")
     parser.add_argument("--images", metavar="DIR_OR_VIDEO",
                         help="with --chessboard: folder of images or a video file")
     parser.add_argument("--max-frames", type=positive_int, default=60,

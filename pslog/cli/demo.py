@@ -16,14 +16,28 @@ from pslog.errors import shell_word
 
 from ._common import installed_command, seconds_at_most
 
+#: the shortest demo, seconds: three frames of each of its 30 fps cameras (a shorter throw
+#: failed after recording it: 'no such file: session.mcap' below a frame period, 'track
+#: 'typeA' has no point inside the ground truth's span' below two frames of each camera)
+MIN_DEMO_S = 0.1
+
+
+def _demo_duration(text: str) -> float:
+    value = seconds_at_most(60.0, "the demo is one throw")(text)
+    if value < MIN_DEMO_S:
+        raise argparse.ArgumentTypeError(
+            f"must be at least {MIN_DEMO_S:g} s (three frames of each camera, for the methods "
+            f"to fuse and the accuracy to be measured), got {text!r}")
+    return value
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", default=None,
                         metavar="DIR", help="output folder (default: a new "
                                             "demo-output/<date-time>/)")
-    parser.add_argument("--duration", default=1.5, metavar="S",
-                        type=seconds_at_most(60.0, "the demo is one throw"),
-                        help="seconds of throw to record, at most 60 (default %(default)s)")
+    parser.add_argument("--duration", default=1.5, metavar="S", type=_demo_duration,
+                        help=f"seconds of throw to record, {MIN_DEMO_S:g} to 60 (default "
+                             f"%(default)s)")
     parser.add_argument("--realtime", action="store_true",
                         help="render at the cameras' real rate instead of as fast as possible")
     parser.add_argument("--no-view", action="store_true", help="do not build demo.rrd")

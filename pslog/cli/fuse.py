@@ -246,6 +246,16 @@ def run(args: argparse.Namespace) -> int:
 
         smooth_threads()
     progress.update(total=len(methods) + 2)  # read, each method, write
+    # a --max-gap-ms below every camera's frame period: no method may bridge from a camera's
+    # frame to its next, which the no-point lines name (they said "too few detections close
+    # enough in time", the option that made them so unnamed)
+    slowest = max(rig.cameras, key=lambda cam: cam.frame_period)
+    whose = ("the" if len({cam.fps for cam in rig.cameras}) == 1
+             else f"camera {slowest.name}'s")
+    short_gap = (f"--max-gap-ms {args.max_gap_ms:g} is shorter than {whose} "
+                 f"{slowest.frame_period * 1e3:.4g} ms frame period: a camera's next frame is "
+                 f"farther than that" if args.max_gap_ms is not None
+                 and args.max_gap_ms / 1e3 < slowest.frame_period else "")
     n_observations = len(observations)
     detections = session.detections
     n_candidates = detections.n_candidates
@@ -323,10 +333,11 @@ def run(args: argparse.Namespace) -> int:
                       f"are the ball, run with --gating off to fuse them")
             for method in (m for m in methods if m in empty):
                 print(_no_point(method, empty[method], args.type_a_max_std_mm,
-                                empty_rejected.get(method, {})))
+                                empty_rejected.get(method, {}), short_gap))
             if not written:
                 raise FusionError(f"no fusion method produced a point from the "
-                                  f"{n_observations} detections of {args.session}")
+                                  f"{n_observations} detections of {args.session}"
+                                  + (f": {short_gap}" if short_gap else ""))
             if early:
                 print("left out, being before the session clock's zero after clock "
                       "correction: " + ", ".join(f"{n} {m} point{'s' if n > 1 else ''}"
@@ -390,12 +401,13 @@ NO_BREAK_SPANNED = ("typeA: --confirm-gaps breaks changed no point: none spanned
 
 
 def _no_point(method: str, dropped: dict[str, int], max_std_mm: float | None,
-              rejected: dict[str, int] | None = None) -> str:
+              rejected: dict[str, int] | None = None, short_gap: str = "") -> str:
     """The line saying why ``method`` gave no point: every point it found left out (by
     reason, ``uncertain`` naming --type-a-max-std-mm's bound), or none found; the
     candidates the gating rejected (``rejected``: count by reason) said with it: they may be
     the detections a point lacked ("too few detections close enough in time" alone, when
-    the gating had rejected them, sent a user to the clocks)."""
+    the gating had rejected them, sent a user to the clocks); ``short_gap``: why a
+    --max-gap-ms below the frame period leaves none close enough, said with it."""
     from pslog.records import by_reason
 
     n = sum((rejected or {}).values())
@@ -404,6 +416,7 @@ def _no_point(method: str, dropped: dict[str, int], max_std_mm: float | None,
              + "; --gating off: each frame's best-scored candidate)" if n else "")
     if not dropped:
         return (f"no point from {method}: too few detections close enough in time"
+                + (f" ({short_gap})" if short_gap else "")
                 + (f" once {gated}" if gated else ""))
     total = sum(dropped.values())
     if set(dropped) == {"uncertain"} and max_std_mm is not None:

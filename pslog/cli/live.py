@@ -234,7 +234,7 @@ def _run(args: argparse.Namespace, stop) -> int:
     warm_up(args.method)  # silent: a failure after it is still one line
     sock = bind_udp(listen)  # a busy port fails here, before any output is opened
     try:
-        sinks, recording = _sinks(args, rig, stop)
+        sinks, recording = _sinks(args, rig, stop, sock.getsockname())
     except BaseException:
         sock.close()
         raise
@@ -369,10 +369,12 @@ def _udp_text(address: tuple[str, int]) -> str:
     return f"udp://[{host}]:{port}" if ":" in host else f"udp://{host}:{port}"
 
 
-def _sinks(args: argparse.Namespace, rig, stop) -> tuple[list, Any]:
+def _sinks(args: argparse.Namespace, rig, stop, listening: tuple) -> tuple[list, Any]:
     """The fuser's outputs, in the order points reach them (the robot's UDP first), and the
     recording among them (None without --record). Any that fails to open is one error line,
-    and the ones opened before it are closed again (a new session file removed)."""
+    and the ones opened before it are closed again (a new session file removed).
+    ``listening``: the fuser's own socket address (an --out that reaches it is refused)."""
+    from pslog.errors import InputError
     from pslog.live.sinks import UdpSink
 
     sinks: list = []
@@ -380,6 +382,11 @@ def _sinks(args: argparse.Namespace, rig, stop) -> tuple[list, Any]:
     try:
         if args.out is not None:
             sinks.append(UdpSink(_udp_text(args.out)))
+            if _reaches(sinks[-1], listening):
+                raise InputError(
+                    f"--out {_udp_text(args.out)} is where pslog live listens "
+                    f"({_udp_text(args.listen)}): its points would come back to it as "
+                    f"foreign datagrams, none to a robot; give the robot's address")
         if args.jsonl:
             sinks.append(_jsonl(args, stop))
         if args.record:
@@ -408,6 +415,20 @@ def _sinks(args: argparse.Namespace, rig, stop) -> tuple[list, Any]:
                 sink.close()
         raise
     return sinks, recording
+
+
+def _reaches(sink, listening: tuple) -> bool:
+    """Whether ``sink``'s datagrams reach the socket bound to ``listening``: the same port,
+    sent to an address of this machine (the source address the OS chose for it is the
+    destination itself) that the socket takes (its own, or any: a wildcard bind)."""
+    host, port = sink.destination[:2]
+    if port != listening[1]:
+        return False
+    try:
+        local = sink.sock.getsockname()[0] == host
+    except OSError:
+        return False
+    return local and (listening[0] in ("0.0.0.0", "::") or listening[0] == host)
 
 
 def _jsonl(args: argparse.Namespace, stop):

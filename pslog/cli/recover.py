@@ -25,6 +25,13 @@ def run(args: argparse.Namespace) -> int:
     # the output was checked before run() (declare_files); on any failure
     # recover_session leaves nothing half-written
     report = recover_session(args.session, args.output, force=args.force)
+    if report["being_recorded"]:
+        # (every other command refuses such a file: "it may still be recording")
+        last = report["last_detection_ns"]
+        upto = "" if last is None else f", up to t = {last / 1e9:.3f} s"
+        print(f"note: {args.session} is still being recorded (another pslog is writing it): "
+              f"{args.output} holds what it had written so far{upto}; run "
+              f"this again once the recording has ended, for all of it")
     if report["rebuilt_metadata"]:
         # (what those messages do not hold is lost with the record: said, as a fuse of the
         # copy would take the nominal clocks without a word)

@@ -45,8 +45,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "readout=shared instead of readout estimates one readout per "
                              "camera model (same image size and frame rate) (default: auto)")
     # the scan steps by 1 ms: a minute is 1.2e5 costs per camera, 1e308 ms no array at all
+    # (at least the session clock's nanosecond: 1e-320 left the scan no step, a traceback)
     parser.add_argument("--search-ms", type=number_at_most(6e4, "ms", "a minute",
-                                                           positive=True),
+                                                           positive=True, least=1e-6),
                         default=None, metavar="MS",
                         help="search each offset over +-MS around the rig's value, at most "
                              "a minute (default: half a frame period)")

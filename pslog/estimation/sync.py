@@ -76,6 +76,11 @@ SHARED_READOUT = "readout=shared"
 RIG_KEY = {"offset": "clock_offset", "drift": "clock_drift_ppm", "readout": "readout"}
 #: Fewest detections a camera needs (with camera 1's in the same stretches) to be synced.
 MIN_DETECTIONS = 30
+#: the narrowest offset search, seconds: the session clock's resolution (a nanosecond); a
+#: narrower one (``--search-ms 1e-320``) left the scan no step (a division by zero)
+MIN_SEARCH_S = 1e-9
+#: the widest offset search, seconds: a minute (the scan steps by 1 ms, 1.2e5 costs a camera)
+MAX_SEARCH_S = 60.0
 #: A ball still for most of the session (the median of its fitted speed below 5 cm/s: a
 #: robot-soccer ball lying on its spot, ``pslog simulate --rest``) is synced from its moving
 #: stretches when at least MIN_DETECTIONS detections see it this fast (m/s; a still ball's
@@ -108,6 +113,21 @@ TIE_LEVEL = 0.05
 #: ``estimate="auto"`` tries drifts on sessions at least this long (seconds): a drift of
 #: d ppm moves a camera by d · 1e-6 · T, below the offsets' σ on shorter ones.
 AUTO_DRIFT_MIN_S = 30.0
+
+
+def check_search_s(search_s: object) -> float | None:
+    """``search_s`` as seconds if it is None or a number in [:data:`MIN_SEARCH_S`,
+    :data:`MAX_SEARCH_S`], else :class:`InputError` naming the value (0 left the scan no step,
+    a negative one scanned backwards, NaN was called longer than the session)."""
+    if search_s is None:
+        return None
+    # (in whole nanoseconds to 1e-6: --search-ms 1e-6 is 9.999999999999999e-10 s)
+    if (isinstance(search_s, bool) or not isinstance(search_s, (int, float, np.number))
+            or not (round(float(search_s) / MIN_SEARCH_S, 6) >= 1
+                    and float(search_s) <= MAX_SEARCH_S)):
+        raise InputError(f"offset search ±{search_s!r} s: give seconds in "
+                         f"[{MIN_SEARCH_S:g}, {MAX_SEARCH_S:g}] (or None: half a frame period)")
+    return float(search_s)
 
 
 @dataclass(frozen=True)
@@ -245,7 +265,9 @@ def estimate_clocks(obs: Observations, rig: Rig, estimate=("offset",),
     Raises
     ------
     FusionError naming what is missing when the ball is seen too little or does not move.
+    InputError : ``search_s`` neither None nor seconds in [1 ns, 60 s]
     """
+    search_s = check_search_s(search_s)
     if tuple([estimate] if isinstance(estimate, str) else estimate) == ("auto",):
         return select_clocks(obs, rig, search_s, options, regularized)
     try:
@@ -390,6 +412,7 @@ def select_clocks(obs: Observations, rig: Rig, search_s: float | None = None,
     else the first fit is the result (one fit). A parameter the ball's motion does not
     determine (the wide fit fails with it: then offsets and readouts without drifts are
     tried) is dropped without a figure, its reason the fit's message."""
+    search_s = check_search_s(search_s)
     options = options or SmoothOptions()
     from scipy.stats import chi2
 

@@ -33,6 +33,7 @@ from typing import Literal, cast
 
 import numpy as np
 
+from ..camera import MIN_FUSE_NOISE_PX
 from ..errors import FusionError
 from ..records import Detections, Observations, Track, point_keys
 from ..rig import Rig
@@ -186,8 +187,12 @@ class FusionOptions:
         if self.confirm_every and not self.confirm_gaps:
             raise FusionError("typeA's confirm_every needs confirm_gaps (it confirms every "
                               "point as confirm_gaps confirms the long-gap ones)")
-        if self.noise_px is not None and not 0 <= self.noise_px <= 1e3:
-            raise FusionError(f"pixel noise must be in [0, 1000] pixels, got {self.noise_px!r}")
+        if self.noise_px is not None and not (
+                self.noise_px == 0 or MIN_FUSE_NOISE_PX <= self.noise_px <= 1e3):
+            # (below MIN_FUSE_NOISE_PX the covariances underflow: typeA's std_m all NaN,
+            # as pslog fuse --noise-px refuses)
+            raise FusionError(f"pixel noise must be 0 (noise-free) or in "
+                              f"[{MIN_FUSE_NOISE_PX:g}, 1000] pixels, got {self.noise_px!r}")
         if self.detector_bias_px is not None and not 0 <= self.detector_bias_px <= 1e3:
             raise FusionError(f"detector bias must be in [0, 1000] pixels, got "
                               f"{self.detector_bias_px!r}")

@@ -20,6 +20,10 @@ The outcome does not depend on the scheduling:
 - when methods fail, the error raised is that of the first failing method in the asked
   order, as running them in turn would raise: after a failure no method later in that order
   starts, the earlier ones still run (one of them may fail too, and its error comes first);
+  a failure that makes other threads fail in odd ways is the one raised: a MemoryError, or
+  a :class:`~pslog.errors.PslogError` when the first error is an ``ImportError`` (a kernel
+  module whose import failed in one thread, numba refusing to start, is half imported to
+  another thread importing it at once);
 - the workers are daemon threads and the calling thread only waits: a Ctrl-C or SIGTERM
   (raised in the main thread) interrupts at once, no method starts after it, and a method
   already running cannot delay the process's exit.
@@ -39,6 +43,8 @@ import threading
 from collections.abc import Callable, Hashable, Iterator, Sequence
 from functools import partial
 from typing import Any
+
+from ..errors import PslogError
 
 #: the methods' relative cost: thread CPU seconds of each on the 90-minute three-camera
 #: type-A session of benchmarks/bench_match.py (its gating excluded; benchmarks/
@@ -291,7 +297,15 @@ class MethodRun:
             # out of memory in one thread makes others fail in odd ways (a module half
             # imported): the MemoryError is the one to report
             memory = [i for i, exc in self.errors.items() if isinstance(exc, MemoryError)]
-            raise self.errors[min(memory or self.errors)]
+            first = min(memory or self.errors)
+            # a kernel module whose import failed in one thread (numba refusing to start:
+            # NUMBA_NUM_THREADS=0, said as a PslogError) is a half-imported module to another
+            # thread importing it at once ("cannot import name ...", a traceback): the
+            # failure's own error is the one to report
+            said = [i for i, exc in self.errors.items() if isinstance(exc, PslogError)]
+            if isinstance(self.errors[first], ImportError) and said:
+                first = min(said)
+            raise self.errors[first]
         if any(result is _UNSET for result in self.results):  # a thread died without a word
             raise MemoryError("a fusion thread ended before its method finished")
 

@@ -287,12 +287,43 @@ def _detections_from_rows(rig: Rig, cams, times, uv, frames, scores, path,
         starts = np.searchsorted(frame_camera, frame_camera, side="left")
         frame_index = np.arange(len(unique)) - starts
     _check_no_repeated_candidate(rig, cams, times, uv, lines, path, missed, cand_frame)
+    _check_seconds(rig, frame_camera, frame_index, frame_time, path)
     if missed is not None and missed.any():  # frames, not candidates
         keep = ~missed
         cand_frame, uv = cand_frame[keep], uv[keep]
         scores = None if scores is None else scores[keep]
     return Detections.from_frames(rig.names, frame_time, frame_camera, frame_index, cand_frame,
                                   uv, None, scores)
+
+
+#: A camera whose frames lie this many frame periods apart (median) holds times in another
+#: unit than seconds: milliseconds (1000), microseconds; a ball seen at every 300th frame
+#: of a 30 fps camera, 10 s apart, is no session to fuse either.
+_UNIT_RATIO = 300.0
+
+
+def _check_seconds(rig: Rig, frame_camera, frame_index, frame_time, path) -> None:
+    """InputError if a camera's frames are :data:`_UNIT_RATIO` frame periods or more apart
+    (the median over its consecutive frames, per frame index step): a CSV of milliseconds
+    imported without a word, its cameras' frames 33 s apart, and ``pslog fuse`` then found
+    "too few detections close enough in time"."""
+    for c, camera in enumerate(rig.cameras):
+        mine = frame_camera == c
+        if np.count_nonzero(mine) < 3:
+            continue
+        order = np.argsort(frame_time[mine], kind="stable")
+        t, k = frame_time[mine][order], frame_index[mine][order]
+        steps = np.maximum(np.diff(k), 1)  # (a CSV's own frame numbers: per frame)
+        spacing = float(np.median(np.diff(t) / steps)) / NS
+        ratio = spacing / camera.frame_period
+        if ratio >= _UNIT_RATIO:
+            unit, factor = (("milliseconds", "1000") if ratio < 1000 * _UNIT_RATIO
+                            else ("microseconds", "1e6"))
+            raise InputError(
+                f"{path}: camera {camera.name}'s frames are {spacing:.4g} s apart (the median), "
+                f"{ratio:.0f} times its {camera.frame_period * 1e3:.4g} ms frame period at "
+                f"{camera.fps:g} fps: the time column is seconds ({unit}: divide them by "
+                f"{factor})")
 
 
 def _check_no_repeated_candidate(rig: Rig, cams, times, uv, lines, path, missed,

@@ -7,7 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import LogFormatError, PslogError
-from ..outputs import RECOVER_LIBRARY, replacing
+from ..outputs import RECOVER_LIBRARY, locked_by_another, replacing
 from ..records import NS
 from ..rig import Rig
 from . import _mcapio as io
@@ -82,12 +82,16 @@ def recover_session(src, dst, *, force: bool = False) -> dict:
     of the data section read), ``discarded_bytes`` (the damaged parts), ``damaged`` (one
     dict per skipped part, see :func:`describe_damage`), ``unknown_channel_messages``
     (intact messages whose channel record was lost with a damaged part), ``data_complete``
-    (no data record was lost), ``was_complete`` (src was a finished, undamaged file) and
-    ``stop_reason``.
+    (no data record was lost), ``was_complete`` (src was a finished, undamaged file),
+    ``being_recorded`` (another pslog held src's writer lock as the copy began: a recording
+    in progress, copied as far as it had been written) and ``stop_reason``.
     """
     src, size = Path(src), 0
     if not src.is_file():
         io.check_file(src)  # its one-line error
+    # a recording in progress (its recorder holds the writer's lock): the copy holds what it
+    # had written by now, which the caller says (it was reported as a salvage, in silence)
+    recording = locked_by_another(src)
 
     from mcap.writer import CompressionType, Writer
 
@@ -197,6 +201,7 @@ def recover_session(src, dst, *, force: bool = False) -> dict:
         "discarded_bytes": discarded,
         "damaged": damaged,
         "unknown_channel_messages": unknown[0],
+        "being_recorded": recording,
         "stop_reason": ("" if complete and scan.summary is not None else
                         "only the summary section was damaged; no data lost" if complete
                         else tail + ("; ..." if len(damaged) > 3 else "")),
