@@ -373,6 +373,12 @@ def sync(session: Session | str | os.PathLike[str],
                           f"{lost[0]} of {lost[1]} frames with a candidate, the ball's too "
                           f"(clocks further apart than it allows)")
             obs, lost = again[0], None
+        elif rough is not None and _near_logged(rough, rig):
+            # the best-scored candidates put every clock within half a frame period of the
+            # logged one and the gating at them lost as much: not the clocks (a 2-camera
+            # rig, the ball out of one camera's view for long stretches while a static
+            # object stays there: the other's ball has no partner; review39b)
+            lost = None
         else:
             gated_note += "; " + _LOST_NOTE.format(lost=lost[0], seen=lost[1])
     if gated_note:
@@ -442,6 +448,14 @@ _LOST_NOTE = ("{lost} of {seen} frames with a candidate lost every one, the ball
               "ms), and the clocks estimated from what is left may be wrong: give each "
               "camera's approximate clock_offset (seconds) in the rig, where pslog sync "
               "starts (docs/timing.md)")
+
+
+def _near_logged(rough: Rig, rig: Rig) -> bool:
+    """Whether every camera's clock offset in ``rough`` lies within half its frame period of
+    ``rig``'s (sync's default offset search): frames lost at ``rig``'s clocks and again at
+    these were not lost to clocks far apart."""
+    return all(abs(a.clock_offset - b.clock_offset) < 0.5 * b.frame_period
+               for a, b in zip(rough.cameras, rig.cameras, strict=True))
 
 
 def _ball_candidates(detections: Detections, rig: Rig):
