@@ -224,3 +224,15 @@ def test_sync_says_nothing_of_clocks_when_the_ball_leaves_one_of_two_views(tmp_p
     assert "rejected by gating" in done.stderr, done.stderr
     assert "lost every one" not in done.stderr, done.stderr
     assert abs(json.loads(done.stdout)["cameras"][1]["offset_s"]) < 1e-3, done.stdout
+
+
+def test_sync_of_cameras_that_never_saw_the_ball_at_once_names_that_cause_too(tmp_path):
+    # (review39b) one clock: cam2 blind for the first half, cam1 for the second; the ball's
+    # detections do not overlap in time, yet the clocks are fine: the line names both causes
+    session = tmp_path / "halves.mcap"
+    _ok("simulate", "--rig", "paper2", "--motion", "rally", "--duration", "10", "--blackout",
+        "cam1=5:5", "--blackout", "cam2=0:5.2", "--seed", "60313", "-o", session)
+    done = _run("sync", session, "-o", tmp_path / "synced.mcap")
+    assert done.returncode == 1 and len(done.stderr.strip().splitlines()) == 1, done
+    assert "do not overlap in time: their times are not on one clock, or the two never saw " \
+           "the ball at once" in done.stderr, done.stderr

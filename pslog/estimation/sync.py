@@ -1067,7 +1067,8 @@ def _pair_cost(sub, rig, c, unknowns, theta, j, value, params, options) -> float
 
 class ClockSpanError(FusionError):
     """A camera's detections do not overlap camera 1's in time: the cameras' times are not
-    on one clock (the cause is the times, not false candidates)."""
+    on one clock, or the two never saw the ball at once (the cause is not false
+    candidates)."""
 
 
 def _check_coverage(obs: Observations, rig: Rig, max_gap_s: float) -> None:
@@ -1092,8 +1093,9 @@ def _check_coverage(obs: Observations, rig: Rig, max_gap_s: float) -> None:
                 f"camera {rig.cameras[c].name}'s detections (t = {mine[0] / NS:.3f} .. "
                 f"{mine[-1] / NS:.3f} s on the session clock) and camera "
                 f"{rig.cameras[0].name}'s ({first[0] / NS:.3f} .. {first[-1] / NS:.3f} s) "
-                f"do not overlap in time: their times are not on one clock; put the "
-                f"cameras' times on one clock first (e.g. shift camera "
+                f"do not overlap in time: their times are not on one clock, or the two "
+                f"never saw the ball at once (each blind while the other saw it); on clocks "
+                f"apart, put the cameras' times on one clock first (e.g. shift camera "
                 f"{rig.cameras[c].name}'s), as close as you can: pslog sync searches each "
                 f"offset within half a frame period (--search-ms widens it)")
         if shared < MIN_DETECTIONS:
