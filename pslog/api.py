@@ -373,12 +373,6 @@ def sync(session: Session | str | os.PathLike[str],
                           f"{lost[0]} of {lost[1]} frames with a candidate, the ball's too "
                           f"(clocks further apart than it allows)")
             obs, lost = again[0], None
-        elif rough is not None and _near_logged(rough, rig):
-            # the best-scored candidates put every clock within half a frame period of the
-            # logged one and the gating at them lost as much: not the clocks (a 2-camera
-            # rig, the ball out of one camera's view for long stretches while a static
-            # object stays there: the other's ball has no partner; review39b)
-            lost = None
         else:
             gated_note += "; " + _LOST_NOTE.format(lost=lost[0], seen=lost[1])
     if gated_note:
@@ -450,14 +444,6 @@ _LOST_NOTE = ("{lost} of {seen} frames with a candidate lost every one, the ball
               "starts (docs/timing.md)")
 
 
-def _near_logged(rough: Rig, rig: Rig) -> bool:
-    """Whether every camera's clock offset in ``rough`` lies within half its frame period of
-    ``rig``'s (sync's default offset search): frames lost at ``rig``'s clocks and again at
-    these were not lost to clocks far apart."""
-    return all(abs(a.clock_offset - b.clock_offset) < 0.5 * b.frame_period
-               for a, b in zip(rough.cameras, rig.cameras, strict=True))
-
-
 def _ball_candidates(detections: Detections, rig: Rig):
     """Each frame's ball at its LOGGED time: the best-scored candidate when no frame holds
     more than one, else the one the gating stage chooses (:func:`pslog.fusion.gating.gate`,
@@ -468,6 +454,7 @@ def _ball_candidates(detections: Detections, rig: Rig):
     candidate lost every one (clocks further apart than the gate allows), else None."""
     if not np.any(detections.candidates_per_frame() > 1) or len(rig) < 2:
         return detections.best(), None, None
+    from .fusion._prepare import default_max_gap_s
     from .fusion.gating import gate
     from .records import point_keys
 
@@ -479,8 +466,11 @@ def _ball_candidates(detections: Detections, rig: Rig):
     seen = per_frame > 0
     # (frames lost to the epipolar gate: a static object alone in a frame, the ball missed,
     # goes for motion; the ball at clocks too far apart, for epipolar)
+    # (review39b: only where another camera saw something moving then, not a static
+    # object alone: the ball out of one camera's view loses the other's no partner)
     lost = gated.rejections.frames_lost_to_epipolar(
-        point_keys(detections.frame_time_ns, detections.frame_camera), per_frame)
+        point_keys(detections.frame_time_ns, detections.frame_camera), per_frame,
+        default_max_gap_s(rig))
     # (walk39: two hosts' clocks 30 ms, 0.25 s, 3 s apart: 39, 87, 90 % of the frames lost,
     # the ball's own detections, against 0.3 % on one clock; the offsets written then 0.4 ms
     # (3.5 σ), 206 ms and 3 s wrong, with a clean-looking table)

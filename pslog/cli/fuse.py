@@ -152,6 +152,7 @@ def run(args: argparse.Namespace) -> int:
         for_session,
     )
     from pslog.fusion._parallel import finishing_order
+    from pslog.fusion._prepare import default_max_gap_s
     from pslog.fusion.gating import start_fusion
     from pslog.log import read_session
     from pslog.log.copy import open_copy
@@ -261,8 +262,12 @@ def run(args: argparse.Namespace) -> int:
     n_candidates = detections.n_candidates
     never_synced = not (session.metadata or {}).get(CLOCK_STD_KEY) and args.rig is None
     # (for the frames the gating lost, said below for a session never synced)
+    # (those where another camera saw something moving then, within the gate's gap: not
+    # the ball out of one camera's view beside a static object; review39b)
     frames = (point_keys(detections.frame_time_ns, detections.frame_camera),
-              detections.candidates_per_frame()) if never_synced and options.gating else None
+              detections.candidates_per_frame(),
+              options.max_gap_s or default_max_gap_s(rig)) if never_synced and options.gating \
+        else None
     del observations, session  # freed before fusing (a 90-minute match's columns)
     # the methods fuse on threads while this thread copies the session into the output and
     # writes each method's track as the method ends (its left-out counts go with it, in its

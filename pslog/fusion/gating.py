@@ -206,26 +206,65 @@ class Rejections:
         found = np.bincount(self.reason, minlength=len(REASONS))
         return {name: int(found[i]) for i, name in enumerate(REASONS)}
 
-    def frames_lost_to_epipolar(self, frame_keys: np.ndarray,
-                                per_frame: np.ndarray) -> int:
+    def frames_lost_to_epipolar(self, frame_keys: np.ndarray, per_frame: np.ndarray,
+                                max_gap_s: float | None = None) -> int:
         """How many frames lost every candidate, one of them to the epipolar gate: the
         ball's own detections when the cameras' clocks are further apart than the gate
         allows (walk39), where a static object alone in a frame is rejected for ``motion``.
+
+        With ``max_gap_s``, only those where another camera's frames with a candidate next
+        before and after its logged time (within ``max_gap_s``, at least one) each held one
+        not rejected for ``motion`` (something moving the gate could have paired it with):
+        a frame whose ball no other camera saw then, the others holding a static object
+        alone, lost no partner to the clocks
+        (review39b: two cameras, the ball out of one's view for long stretches while a
+        static object stays there lost a third of the frames on one clock).
 
         Parameters
         ----------
         frame_keys : (F,) int64, the session's frames' :func:`pslog.records.point_keys`
             (logged time, camera), unique
         per_frame : (F,) int, each frame's number of candidates
+        max_gap_s : float, seconds (the gate's ``max_gap_s``); None: every such frame
         """
         from ..records import matching_rows, point_keys
 
+        frame_keys, per_frame = np.asarray(frame_keys), np.asarray(per_frame)
         keys = point_keys(self.frame_time_ns, self.camera)
         frames, count = np.unique(keys, return_counts=True)
         rows, found = matching_rows(frames, frame_keys)
-        whole = found & (count == np.asarray(per_frame)[rows])
-        return int(np.count_nonzero(whole & np.isin(frames,
-                                                    keys[self.reason == EPIPOLAR])))
+        lost = frames[found & (count == per_frame[rows])
+                      & np.isin(frames, keys[self.reason == EPIPOLAR])]
+        if max_gap_s is None or not len(lost):
+            return len(lost)
+        # each frame's candidates not rejected for motion (kept, or rejected otherwise)
+        still, still_count = np.unique(keys[self.reason == MOTION], return_counts=True)
+        rows, found = matching_rows(still, frame_keys)
+        moving = per_frame.astype(np.int64)
+        np.subtract.at(moving, rows[found], still_count[found])
+        # (point_keys: time * 256 + camera)
+        frame_time, frame_camera = frame_keys // 256, frame_keys % 256
+        lost_time, lost_camera = lost // 256, lost % 256
+        gap_ns = round(max_gap_s * NS)
+        partnered = np.zeros(len(lost), dtype=bool)
+        for cam in np.unique(frame_camera):
+            mine = (frame_camera == cam) & (per_frame > 0)
+            order = np.argsort(frame_time[mine], kind="stable")
+            times, moves = frame_time[mine][order], (moving[mine] > 0)[order]
+            other = np.flatnonzero(lost_camera != cam)
+            if not len(times) or not len(other):
+                continue
+            t = lost_time[other]
+            # its frames with a candidate next before (or at) and after each lost frame's
+            # time, within the gap: the ones the gate pairs it with; each such one holding
+            # something moving (a static object alone beside the ball missed: no partner)
+            j = np.searchsorted(times, t, side="right")
+            before = (j > 0) & (t - times[np.maximum(j - 1, 0)] <= gap_ns)
+            after = (j < len(times)) & (times[np.minimum(j, len(times) - 1)] - t <= gap_ns)
+            ok = ((~before | moves[np.maximum(j - 1, 0)])
+                  & (~after | moves[np.minimum(j, len(times) - 1)]) & (before | after))
+            partnered[other] |= ok
+        return int(np.count_nonzero(partnered))
 
     @classmethod
     def empty(cls) -> Rejections:
