@@ -101,10 +101,11 @@ def _apart_in_time(detections) -> str | None:
     for start, stop, after in spans[1:]:
         if start > end:  # (a gap in time no camera spans: nothing across it is fused)
             return (f"note: camera {after}'s frames start {format_time(start - end)} s after "
-                    f"camera {before}'s end: the times of the cameras do not overlap, they are "
-                    f"not on one clock; nothing can be fused until they are ('pslog sync' "
-                    f"searches each clock's offset within half a frame period, "
-                    f"--search-ms widens it): shift a camera's times in the CSV")
+                    f"camera {before}'s end: the cameras' times do not overlap, so either "
+                    f"they are not on one clock (then shift a camera's times in the CSV: "
+                    f"'pslog sync' searches each clock's offset within half a frame period, "
+                    f"--search-ms widens it) or the cameras never saw the ball at once; "
+                    f"nothing across that gap can be fused")
         if stop > end:
             end, before = stop, after
     return None
