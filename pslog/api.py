@@ -452,7 +452,8 @@ def _ball_candidates(detections: Detections, rig: Rig):
     second object or a reflection), a note saying how many candidates it rejected, and
     ``(lost, seen)`` when more than :data:`LOST_FRAMES_SHARE` of the ``seen`` frames with a
     candidate lost every one (clocks further apart than the gate allows), else None."""
-    if not np.any(detections.candidates_per_frame() > 1) or len(rig) < 2:
+    per_frame = detections.candidates_per_frame()
+    if not np.any(per_frame > 1) or len(rig) < 2:
         return detections.best(), None, None
     from .fusion._prepare import default_max_gap_s
     from .fusion.gating import gate
@@ -462,7 +463,6 @@ def _ball_candidates(detections: Detections, rig: Rig):
     kept = gated.kept(detections)
     note = (f"{len(gated.rejections)} of {len(gated.chosen)} candidates rejected by gating "
             f"(the ball chosen among each frame's candidates, as `pslog fuse` does)")
-    per_frame = detections.candidates_per_frame()
     seen = per_frame > 0
     # (frames lost to the epipolar gate: a static object alone in a frame, the ball missed,
     # goes for motion; the ball at clocks too far apart, for epipolar)
