@@ -25,7 +25,8 @@ they share numba's cache on disk), which about halves the wall time:
   the batch ``filter`` (the loop around the step, the start's window fits; the gate's
   kernels by then in the cache) and the streaming ``typeA`` through the stream gate (type
   A's kernel in the cache by then: the streams give it the batch run's argument types),
-  then ``pslog redetect``'s compiled screen and JPEG decoder (on one small frame).
+  the batch gate's whole-session choice (a dirty session's), then ``pslog redetect``'s
+  compiled screen and JPEG decoder (on one small frame).
 
 A kernel compiled by both processes would be compiled twice for nothing: the order above
 keeps each kernel to one of them on a machine the two share evenly.
@@ -200,6 +201,15 @@ def _second_part() -> None:
             fuser.push([int(det.frame_time_ns[f])] * n, [int(det.frame_camera[f])] * n,
                        det.cand_uv[rows])
     fuser.flush()
+    # the batch gate's whole-session choice (a dirty session's fuse: every frame decided by
+    # those kernels in one call, gating._decide_compiled), in both forms' one signature
+    from pslog.fusion import gating
+
+    was, gating.WHOLE_COMPILED = gating.WHOLE_COMPILED, True
+    try:
+        gating.gate(det, data.rig, causal=False)
+    finally:
+        gating.WHOLE_COMPILED = was
     # pslog redetect's compiled screen and screened JPEG decoder (recorders/_jpeg.py)
     from recorders.detect import HsvRange
     from recorders.redetect import _warm_screened

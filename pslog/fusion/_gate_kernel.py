@@ -11,9 +11,15 @@ operations in the same order on the same history, so the same bits and the same 
 (``tests/test_gate_kernel.py`` compares it with the Python form, and the stream with the
 batch gate). Each function names the Python one it mirrors in :mod:`pslog.fusion.gating`.
 
-The batch gate (:func:`~pslog.fusion.gating.gate`) uses one of them too: every candidate's
-3D point by :func:`points_all` (``points_one`` per row, the numpy form's bits) where this
-module is loaded (``pslog fuse`` preloads it), its numpy form otherwise.
+The batch gate (:func:`~pslog.fusion.gating.gate`) uses them too, where this module is
+loaded (``pslog fuse`` preloads it), its numpy and Python forms otherwise: every candidate's
+support, 3D point and stillness in arrays (:func:`support_all`, :func:`points_all`,
+:func:`static_camera`: the numpy forms' bits), and, on a session whose frames the Python
+decider would mostly decide one by one (a static object, blobs, misses, two cameras:
+``gating._decide_compiled``), the whole sequential choice in one call (:func:`gate_frames`
+over a :class:`GateState` holding every frame: :func:`decide_at` per frame, the stream's
+steps, in the causal form or the offline one, ``opt[O_CAUSAL]``), the same choices as the
+Python decider (``tests/test_gate_whole.py``).
 
 Two of Python's float operations are not the compiled ones and are reproduced on purpose:
 
@@ -59,8 +65,8 @@ _I64_MIN = int(np.iinfo(np.int64).min)
 #: rows of ``opt`` (float64 options and constants, see :func:`options_array`)
 (O_EPI, O_VMAX, O_HALF_ACCEL, O_TRACK_M, O_JUMP, O_WINDOW, O_MAX_SPEED, O_LOOSE, O_STATIC_S,
  O_STATIC_M, O_ALONE, O_G, O_TWO, O_TRACK_POINTS, O_WAIT, O_GAP, O_SUM, O_LONG_STILL,
- O_LONG_STILL_C) = range(19)
-N_OPT = 19
+ O_LONG_STILL_C, O_CAUSAL, O_SEVERAL) = range(21)
+N_OPT = 21
 
 
 def _python_sum_mode() -> int:
@@ -154,14 +160,18 @@ def _n_usable(csup, b, j, n, narrowed):
 
 @kernel
 def support_one(t, l0, l1, l2, b, keys, fi, fflag, ct, cf, csup, right, narrowed, opt):
-    """gating._support_one, causal, for one candidate at corrected time ``t`` (its epipolar
-    line ``l`` in camera b) over b's kept frames (``keys``: their times): from every
-    candidate (``narrowed`` False) or from the candidates that may support (``csup``) of
-    frames decided with a rejected one. ``right``: bisect_right (else bisect_left).
+    """gating._support_one for one candidate at corrected time ``t`` (its epipolar line
+    ``l`` in camera b) over b's kept frames (``keys``: their times): from every candidate
+    (``narrowed`` False) or from the candidates that may support (``csup``) of frames
+    decided with a rejected one. ``right``: bisect_right (else bisect_left). Causal where
+    ``opt[O_CAUSAL]`` (the frames up to ``t`` + wait); else offline: the two usable frames
+    around ``t`` (interpolated), extrapolated from the two before only where b has no usable
+    frame after ``t`` (the batch gate's offline form, :func:`gate_frames`).
     Returns (ratio, carried u, carried v, found): ratio NaN when no frame is near."""
     epi, vmax, half_accel = opt[O_EPI], opt[O_VMAX], opt[O_HALF_ACCEL]
     wait, gap = np.int64(opt[O_WAIT]), np.int64(opt[O_GAP])
-    target = t + wait
+    causal = opt[O_CAUSAL] != 0.0
+    target = t + wait if causal else t
     last = (np.searchsorted(keys, target, side="right") if right
             else np.searchsorted(keys, target, side="left")) - 1
     i1 = last
@@ -172,20 +182,31 @@ def support_one(t, l0, l1, l2, b, keys, fi, fflag, ct, cf, csup, right, narrowed
     while i0 >= 0 and _n_usable(csup, b, i0, fi[b, i0, 3],
                                 narrowed and fflag[b, i0, 1] != 0) == 0:
         i0 -= 1
-    near0 = i0 >= 0 and abs(t - keys[i0]) <= gap
+    inext = -1
+    if not causal:
+        inext = last + 1
+        while inext < keys.shape[0] and _n_usable(csup, b, inext, fi[b, inext, 3],
+                                                  narrowed and fflag[b, inext, 1] != 0) == 0:
+            inext += 1
+        if inext == keys.shape[0]:
+            inext = -1
+    # the pair: interpolated between i1 and inext, else extrapolated from i0 and i1
+    p0, p1 = (i1, inext) if inext >= 0 else (i0, i1)
+    near0 = p0 >= 0 and abs(t - keys[p0]) <= gap
     near1 = i1 >= 0 and abs(t - keys[i1]) <= gap
-    if near0 and near1:
+    near_p1 = p1 >= 0 and abs(t - keys[p1]) <= gap
+    if near0 and near_p1:
         best, bu, bv, found = math.inf, math.nan, math.nan, False
-        only0 = narrowed and fflag[b, i0, 1] != 0
-        only1 = narrowed and fflag[b, i1, 1] != 0
-        for q0 in range(fi[b, i0, 3]):
-            if only0 and not csup[b, i0, q0]:
+        only0 = narrowed and fflag[b, p0, 1] != 0
+        only1 = narrowed and fflag[b, p1, 1] != 0
+        for q0 in range(fi[b, p0, 3]):
+            if only0 and not csup[b, p0, q0]:
                 continue
-            t0, u0, v0 = ct[b, i0, q0], cf[b, i0, q0, 0], cf[b, i0, q0, 1]
-            for q1 in range(fi[b, i1, 3]):
-                if only1 and not csup[b, i1, q1]:
+            t0, u0, v0 = ct[b, p0, q0], cf[b, p0, q0, 0], cf[b, p0, q0, 1]
+            for q1 in range(fi[b, p1, 3]):
+                if only1 and not csup[b, p1, q1]:
                     continue
-                t1, u1, v1 = ct[b, i1, q1], cf[b, i1, q1, 0], cf[b, i1, q1, 1]
+                t1, u1, v1 = ct[b, p1, q1], cf[b, p1, q1, 0], cf[b, p1, q1, 1]
                 span = (t1 - t0) / _NS
                 if not span > 0:
                     continue
@@ -709,7 +730,7 @@ def choose(a, at, fi, fflag, ct, cf, trk, ist, centers, opt, static, lone, avail
         t_s = ct[a, at, i] / _NS
         t_s_frame = t_s
         rx, ry, rz = cf[a, at, i, 2], cf[a, at, i, 3], cf[a, at, i, 4]
-        if static[i] != 0.0:
+        if static[i] != 0.0 and opt[O_SEVERAL] != 0.0:  # (gating._Decider.several)
             reason[i] = _MOTION
             continue
         if lone[i] == lone[i]:  # gating._Decider.decide: kept where the camera followed it
@@ -886,12 +907,24 @@ def decide_frame(fid, a, fi, fflag, ct, cf, csup, count, trk, ist, F, centers, k
     (gating._still_long's ``T``). ``work``: float64 scratch of at least
     (k (7 m + 18) + 6 (m + 1) + 4 + m) values. Stores the chosen candidate (-1 none) in
     ``fi[a, at, 4]`` (gating._Decider.picked: the next frame of the camera reads it)."""
-    m = len(lags)
     at = count[a] - 1
     while at >= 0 and fi[a, at, 2] != fid:
         at -= 1
     if at < 0:  # (never from StreamGate: a pending frame is never trimmed)
         raise IndexError("decide_frame: camera has no kept frame of this push id")
+    return decide_at(a, at, fi, fflag, ct, cf, csup, count, trk, ist, F, centers, k_inv, rot,
+                     still_f, lags, long_lags, long_t, opt, work, reason)
+
+
+@kernel
+def decide_at(a, at, fi, fflag, ct, cf, csup, count, trk, ist, F, centers, k_inv, rot,
+              still_f, lags, long_lags, long_t, opt, work, reason):
+    """:func:`decide_frame` of camera ``a``'s kept frame at row ``at``; causal where
+    ``opt[O_CAUSAL]``, else the batch gate's offline form (each candidate's support from b's
+    frames around its time, gating._support_one; the lag to the nearer of the two,
+    gating._lags), with the static verdict a rejection only where ``opt[O_SEVERAL]``
+    (gating._Decider.several)."""
+    m = len(lags)
     k = fi[a, at, 3]
     key = fi[a, at, 0]
     wait, gap = np.int64(opt[O_WAIT]), np.int64(opt[O_GAP])
@@ -951,20 +984,31 @@ def decide_frame(fid, a, fi, fflag, ct, cf, csup, count, trk, ist, F, centers, k
     c_dec[:] = math.nan
     lag[:] = math.inf
     differs[:] = 0.0
-    # ---- StreamGate._support
+    # ---- StreamGate._support (offline: gating._support_one's form, gating._lags)
+    causal = opt[O_CAUSAL] != 0.0
     for b in range(m):
         nb = count[b]
         if b == a or nb == 0:
             continue
         keys = fi[b, :nb, 0]
-        right = wait > 0 or b < a
+        right = (not causal) or wait > 0 or b < a
         for j in range(k):
             t = ct[a, at, j]
             u, v = cf[a, at, j, 0], cf[a, at, j, 1]
-            last = (np.searchsorted(keys, t + wait, side="right") if right
-                    else np.searchsorted(keys, t + wait, side="left"))
-            if last - 1 >= 0:
-                lag[j, b] = abs(t - keys[last - 1]) / _NS
+            target = t + wait if causal else t
+            last = (np.searchsorted(keys, target, side="right") if right
+                    else np.searchsorted(keys, target, side="left"))
+            if causal:
+                if last - 1 >= 0:
+                    lag[j, b] = abs(t - keys[last - 1]) / _NS
+            else:  # the nearer of the latest frame at or before t and the first after
+                best_gap = np.int64(-1)
+                if last - 1 >= 0:
+                    best_gap = abs(t - keys[last - 1])
+                if last < nb and (best_gap < 0 or abs(t - keys[last]) < best_gap):
+                    best_gap = abs(t - keys[last])
+                if best_gap >= 0:
+                    lag[j, b] = best_gap / _NS
             l0, l1, l2 = _line_of(F[a, b], u, v)
             r, cu, cv, found = support_one(t, l0, l1, l2, b, keys, fi, fflag, ct, cf, csup,
                                            right, False, opt)
@@ -972,8 +1016,10 @@ def decide_frame(fid, a, fi, fflag, ct, cf, csup, count, trk, ist, F, centers, k
             if found:
                 c_every[j, b, 0], c_every[j, b, 1] = cu, cv
             first = np.searchsorted(keys, t - gap, side="left")
+            # the frames the support may reach (offline: those after t within the gap too)
+            reach = last if causal else np.searchsorted(keys, t + gap, side="right")
             narrowed = False
-            for i in range(first, last):
+            for i in range(first, reach):
                 if fflag[b, i, 1]:
                     narrowed = True
                     break
@@ -1197,10 +1243,35 @@ def push_frame(fi, fflag, ct, cf, csup, count, cam, t, k, times, uv, xy, distort
     return fid
 
 
-def options_array(options, wait_ns: int, max_gap_ns: int, gravity: float) -> np.ndarray:
+@kernel
+def gate_frames(cams, ats, rows, fi, fflag, ct, cf, csup, count, trk, ist, F, centers, k_inv,
+                rot, still_f, lags, long_lags, long_t, opt, work, reason, out, ratio):
+    """The batch gate's sequential choice (gating._decide_in_order) in one call: the kept
+    frames ``(cams[n], ats[n])`` decided by :func:`decide_at` in that order (the batch's
+    (time, camera) order; every frame of the session kept, none trimmed), each candidate's
+    reason code written at its row of the session, ``out[rows[a, at, j]]`` (int8: -1
+    chosen, -2 contested, else the rejection's code), and the support ratio it was decided
+    with at ``ratio[rows[a, at, j]]`` (m,) (:meth:`GateState.decided_ratio`)."""
+    m = ratio.shape[1]
+    for n in range(cams.shape[0]):
+        a, at = cams[n], ats[n]
+        decide_at(a, at, fi, fflag, ct, cf, csup, count, trk, ist, F, centers, k_inv, rot,
+                  still_f, lags, long_lags, long_t, opt, work, reason)
+        k = fi[a, at, 3]
+        for j in range(k):
+            row = rows[a, at, j]
+            out[row] = reason[j]
+            for b in range(m):  # (decide_at's r_dec: work[3 k m:4 k m] as (k, m))
+                ratio[row, b] = work[3 * k * m + j * m + b]
+
+
+def options_array(options, wait_ns: int, max_gap_ns: int, gravity: float,
+                  causal: bool = True, several: bool = True) -> np.ndarray:
     """The float64 ``opt`` row the kernels read (``O_*`` indices): the gate's options, the
-    wait and max gap (ns: below 2**53, exact), gravity, the exponent 2.0, SUM_MODE and the
-    long image test's constants (gating.LONG_STILL, gating.LONG_STILL_C)."""
+    wait and max gap (ns: below 2**53, exact), gravity, the exponent 2.0, SUM_MODE, the
+    long image test's constants (gating.LONG_STILL, gating.LONG_STILL_C), the form (1.0
+    causal, 0.0 offline) and whether a static candidate is rejected (gating._Decider.several,
+    1.0 always in the causal form)."""
     from .gating import LONG_STILL, LONG_STILL_C
 
     opt = np.zeros(N_OPT)
@@ -1213,6 +1284,7 @@ def options_array(options, wait_ns: int, max_gap_ns: int, gravity: float) -> np.
     opt[O_G], opt[O_TWO], opt[O_TRACK_POINTS] = gravity, 2.0, int(options.track_points)
     opt[O_WAIT], opt[O_GAP], opt[O_SUM] = wait_ns, max_gap_ns, SUM_MODE
     opt[O_LONG_STILL], opt[O_LONG_STILL_C] = LONG_STILL, LONG_STILL_C
+    opt[O_CAUSAL], opt[O_SEVERAL] = float(causal), float(several)
     return opt
 
 
@@ -1348,3 +1420,58 @@ class GateState:
         candidates' support from the decided frames: gating._decided's ``ratio``), a copy."""
         m = self.m
         return self.work[3 * k * m:4 * k * m].reshape(k, m).copy()
+
+
+def gate_session(c, tables, rig, options, wait_ns: int, max_gap_ns: int, F, constants,
+                 lags, gravity: float, causal: bool, several: bool, frames,
+                 reason) -> np.ndarray:
+    """The batch gate's choice (gating._decided after its geometry) by :func:`gate_frames`:
+    every frame of the session kept in a :class:`GateState` (each camera's in its frame
+    table's order, gating._frame_table: ``tables``), decided in the batch's order
+    (``frames``: ``(cameras, positions)`` (F,) of each frame, in that order). ``c``:
+    gating._Candidates (corrected times, undistorted pixels, rays: the batch's own values,
+    copied in); sets ``reason`` (C,) int8 of every candidate (-1 chosen, -2 contested) and
+    returns the support ratio (C, m) each was decided with (gating._decided's)."""
+    state, rows = session_state(c, tables, rig, options, wait_ns, max_gap_ns, F, constants,
+                                lags, gravity, causal, several)
+    m = len(rig)
+    cams, ats = frames
+    ratio = np.full((len(reason), m), np.nan)
+    gate_frames(np.ascontiguousarray(cams, dtype=np.int64),
+                np.ascontiguousarray(ats, dtype=np.int64), rows, state.fi, state.fflag,
+                state.ct, state.cf, state.csup, state.count, state.trk, state.ist, state.F,
+                state.centers, state.k_inv, state.rot, state.still_f, state.lags,
+                state.long_lags, state.long_t, state.opt, state.work, state.reason, reason,
+                ratio)
+    return ratio
+
+
+def session_state(c, tables, rig, options, wait_ns: int, max_gap_ns: int, F, constants, lags,
+                  gravity: float, causal: bool, several: bool):
+    """A :class:`GateState` holding every frame of the session (:func:`gate_session`'s
+    arguments), none decided, and ``rows`` (m, H, K) int64: the session row of each kept
+    candidate (-1 padding)."""
+    m = len(rig)
+    h_max = max(1, max(len(times) for times, _ in tables))
+    k_max = max(1, max(table.shape[1] for _, table in tables))
+    state = GateState(rig, options, wait_ns, max_gap_ns, F, constants, lags, gravity,
+                      frames=h_max, candidates=k_max)
+    state.opt = options_array(options, wait_ns, max_gap_ns, gravity, causal, several)
+    rows = np.full((m, h_max, k_max), -1, np.int64)
+    for b, (times, table) in enumerate(tables):
+        h, k = table.shape
+        if h == 0:
+            continue
+        valid = table >= 0
+        r = np.maximum(table, 0)
+        state.fi[b, :h, 0] = times
+        state.fi[b, :h, 2] = np.arange(h)
+        state.fi[b, :h, 3] = valid.sum(axis=1)
+        state.fi[b, :h, 4] = -1
+        state.ct[b, :h, :k] = np.where(valid, c.time_ns[r], 0)
+        state.cf[b, :h, :k, 0:2] = np.where(valid[..., None], c.uv_und[r], np.nan)
+        state.cf[b, :h, :k, 2:5] = np.where(valid[..., None], c.ray_dir[r], np.nan)
+        state.csup[b, :h, :k] = 1
+        state.count[b] = h
+        rows[b, :h, :k] = table
+    return state, rows

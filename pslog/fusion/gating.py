@@ -1635,12 +1635,35 @@ def _decided(c: _Candidates, rig: Rig, options: GatingOptions, causal: bool, wai
              max_gap_ns: int, reason: np.ndarray, tables=None) -> np.ndarray:
     """:func:`gate`'s choice: sets ``reason`` (C,) of every rejected candidate; returns the
     epipolar support ratio (C, m) each candidate was decided with (``tables``: the frame
-    tables of ``c``, made here when None)."""
+    tables of ``c``, made here when None). Decided by :func:`_decide_in_order` or, where
+    :func:`_decide_compiled` says, by the compiled kernels over every frame at once (the
+    same choices)."""
     n = len(c.camera)
     if tables is None:
         tables = _frame_table(c, len(rig))
     F = fundamental_matrices(rig.cameras)
-    compiled = _kernels(n)
+    # frames in (time, camera) order of their best candidate; candidates contiguous per frame
+    starts = np.flatnonzero(np.r_[True, c.frame[1:] != c.frame[:-1]])
+    ends = np.r_[starts[1:], n]
+    order = np.lexsort((c.camera[starts], c.time_ns[starts]))
+    several = causal or bool(np.any(ends - starts >= 2))
+    whole, python_s = _decide_compiled(c, starts, ends, tables, max_gap_ns)
+    # (the kernels loaded for the whole-session choice where the Python decider's frames
+    # would cost more than loading them: WHOLE_LOAD_S)
+    compiled = _kernels(n, wait=whole and python_s >= WHOLE_LOAD_S)
+    if whole and compiled and _sums_reproduced():
+        # every frame decided by the compiled stream gate's steps in one call (the same
+        # bits as the path below: tests/test_gate_whole.py)
+        from ._gate_kernel import gate_session
+
+        position = np.zeros(n, dtype=np.int64)  # a frame's first row -> its table row
+        for _, table in tables:
+            position[table[:, 0]] = np.arange(len(table))
+        first = starts[order]
+        return gate_session(c, tables, rig, options, wait_ns, max_gap_ns, F,
+                            _rig_constants(rig),
+                            [int(np.ceil(options.static_s * cam.fps)) for cam in rig.cameras],
+                            G, causal, several, (c.camera[first], position[first]), reason)
     ratio, carried, used = _support(c, rig, F, tables, options, max_gap_ns, causal, wait_ns,
                                     compiled=compiled)
     constants = _rig_constants(rig)
@@ -1650,15 +1673,88 @@ def _decided(c: _Candidates, rig: Rig, options: GatingOptions, causal: bool, wai
                                       compiled=compiled,
                                       held=_held(c, rig, ratio, carried, points, miss,
                                                  options, constants))
-    # frames in (time, camera) order of their best candidate; candidates contiguous per frame
-    starts = np.flatnonzero(np.r_[True, c.frame[1:] != c.frame[:-1]])
-    ends = np.r_[starts[1:], n]
-    order = np.lexsort((c.camera[starts], c.time_ns[starts]))
     _decide_in_order(c, rig, options, (starts, ends, order), tables, F,
                      (ratio, carried, used, _lags(c.time_ns, tables, used, compiled)),
                      (points, in_front), (static, stillness, lone), reason,
                      causal, wait_ns, max_gap_ns, constants)
     return ratio
+
+
+#: None: :func:`_decide_compiled` decides by the session; True / False: always / never the
+#: whole-session compiled choice (tests compare the two paths)
+WHOLE_COMPILED: bool | None = None
+#: frames the Python decider cannot take in arrays (:func:`_decide_compiled`), as a share
+#: of all frames, from which the batch gate decides every frame by the compiled kernels
+WHOLE_FROM_SHARE = 0.05
+#: estimated CPU seconds of the Python decider's frames from which a gate whose compiled
+#: kernels are not loaded yet loads them (or waits for ``pslog fuse``'s preload) for the
+#: whole-session choice: numba's start and the kernels' cache, ~0.3-0.6 s
+WHOLE_LOAD_S = 0.3
+#: bytes of kept state (:class:`pslog.fusion._gate_kernel.GateState` holding every frame) up
+#: to which the whole-session compiled choice is made; beyond, the Python decider
+WHOLE_MAX_BYTES = 1 << 30
+#: the Python decider's cost per frame, s (:func:`_decide_compiled`'s estimate): one
+#: candidate that two other cameras support (taken in arrays), one candidate otherwise,
+#: several candidates
+_PYTHON_S = (1.1e-6, 12e-6, 150e-6)
+#: frames :func:`_decide_compiled` looks at, at most (evenly spaced: a share's estimate)
+_WHOLE_SAMPLE = 20_000
+
+
+def _decide_compiled(c: _Candidates, starts: np.ndarray, ends: np.ndarray, tables,
+                     max_gap_ns: int) -> tuple[bool, float]:
+    """Whether the batch gate should decide every frame by the compiled kernels in one call
+    (:func:`pslog.fusion._gate_kernel.gate_session`) rather than by :func:`_decide_in_order`
+    (the same choices: the same steps on the same bits; ``tests/test_gate_whole.py``), and
+    the Python decider's estimated CPU seconds.
+
+    The compiled kernels decide each frame whole: ~1.7 µs a frame (a clean 90-minute match,
+    three cameras, the geometry included). The Python path takes in arrays a frame of one
+    candidate that two other cameras support (~1.1 µs), but decides any other in Python:
+    ~12 µs a frame of one candidate (one other camera near: misses, drops, a two-camera
+    rig), ~150 µs one of several (a static object, blobs) (:data:`_PYTHON_S`). So the
+    compiled kernels wherever at least :data:`WHOLE_FROM_SHARE` of the frames are not of the
+    first kind (judged by the frames' times alone: one candidate, and a frame of two other
+    cameras within the gate's gap; on up to :data:`_WHOLE_SAMPLE` evenly spaced frames), and
+    the state holding every frame stays below :data:`WHOLE_MAX_BYTES`. Imports nothing (the
+    caller loads the kernels only where they are worth it)."""
+    n_frames = len(starts)
+    if n_frames == 0:
+        return False, 0.0
+    # judged on every frame up to _WHOLE_SAMPLE of them, else on evenly spaced ones
+    step = max(1, n_frames // _WHOLE_SAMPLE)
+    first, last = starts[::step], ends[::step]
+    several = last - first >= 2
+    if len(tables) < 3:  # (no frame has two other cameras)
+        simple = np.zeros(len(first), dtype=bool)
+    else:
+        t, camera = c.time_ns[first], c.camera[first]
+        near = np.zeros(len(first), dtype=np.int64)
+        for b, (times, _) in enumerate(tables):
+            if len(times) == 0:
+                continue
+            at = np.searchsorted(times, t)
+            gap = np.minimum(np.abs(t - times[np.maximum(at - 1, 0)]),
+                             np.abs(times[np.minimum(at, len(times) - 1)] - t))
+            near += (gap <= max_gap_ns) & (camera != b)
+        simple = ~several & (near >= 2)
+    shares = np.array([np.mean(simple), np.mean(~simple & ~several), np.mean(several)])
+    python_s = float(n_frames * (shares @ np.array(_PYTHON_S)))
+    if WHOLE_COMPILED is not None:
+        return WHOLE_COMPILED, python_s
+    h_max = max(len(times) for times, _ in tables)
+    k_max = max(table.shape[1] for _, table in tables)
+    if len(tables) * h_max * k_max * (9 * 8 + 8 + 8 + 1) > WHOLE_MAX_BYTES:
+        return False, python_s
+    return bool(shares[1] + shares[2] >= WHOLE_FROM_SHARE), python_s
+
+
+def _sums_reproduced() -> bool:
+    """Whether the compiled kernels reproduce this Python's ``sum`` of floats (their
+    module loaded: ``_gate_kernel.SUM_MODE``)."""
+    from ._gate_kernel import SUM_MODE
+
+    return SUM_MODE >= 0
 
 
 #: candidates from which the batch gate loads its compiled kernels itself (numba's start,
@@ -1682,12 +1778,13 @@ def _kernels_ready() -> bool:
     return True
 
 
-def _kernels(n: int) -> bool:
+def _kernels(n: int, wait: bool = False) -> bool:
     """Whether the gate of ``n`` candidates runs :mod:`._gate_kernel`'s kernels (the same
     bits as the numpy forms): where that module is loaded (``pslog fuse`` preloads it on
     another thread; a gate that starts before that import is done waits for it here, at
-    ``_KERNELS_FROM`` candidates or more, rather than burn the numpy forms' CPU meanwhile)."""
-    if "pslog.fusion._gate_kernel" not in sys.modules and n < _KERNELS_FROM:
+    ``_KERNELS_FROM`` candidates or more, or where ``wait`` says the kernels are worth it,
+    rather than burn the numpy forms' CPU meanwhile)."""
+    if "pslog.fusion._gate_kernel" not in sys.modules and n < _KERNELS_FROM and not wait:
         return False
     try:  # loaded, being loaded by the preload (wait for it), or to be loaded here
         import importlib
