@@ -101,6 +101,22 @@ def test_eval_truth_file_scores_as_the_sessions_own_truth(cli, fused):
     assert text.splitlines()[0].endswith("; the session's own truth not used"), text
     assert json.loads(_ok(cli, "eval", session, "--truth", folder / "truth.csv",
                           "--json")) == own
+    # TUM without the .tum suffix (the TUM RGB-D benchmark's groundtruth.txt), no comment
+    tum_lines = (folder / "traj" / "truth.tum").read_text().splitlines()[1:]
+    (folder / "groundtruth.txt").write_text("\n".join(tum_lines) + "\n")
+    assert json.loads(_ok(cli, "eval", session, "--truth", folder / "groundtruth.txt",
+                          "--json")) == own
+    # a tracks CSV of one method (export --csv's rows of smooth, its quality columns
+    # ignored) as the truth of the others: its own track scores 0 against itself
+    _ok(cli, "export", session, "--csv", folder / "tracks.csv")
+    with open(folder / "tracks.csv", newline="") as fh:
+        rows = list(csv.reader(fh))
+    method = rows[0].index("method")
+    with open(folder / "smooth.csv", "w", newline="") as fh:
+        csv.writer(fh).writerows([rows[0], *(r for r in rows[1:] if r[method] == "smooth")])
+    self_scored = json.loads(_ok(cli, "eval", session, "--truth", folder / "smooth.csv",
+                                 "--method", "smooth", "--json"))
+    assert self_scored[0]["max_mm"] == 0.0 and self_scored[0]["n_points"] > 0
     # every third sample left out: interpolated between the others, the figures within
     # the interpolation's error (the ball's path bends little over 1/30 s; the bounces')
     _write_truth_csv(folder / "sparse.csv", truth.time_ns[::3], truth.position_world[::3],

@@ -67,7 +67,8 @@ def read_truth_file(path: str | Path) -> TruthFile:
     """Read a truth trajectory (CSV ``t,x,y,z`` or TUM: the module docstring).
 
     The format is a ``.tum`` or ``.csv`` / ``.tsv`` suffix's, else the content's: a first
-    line starting with ``#`` or without a comma is TUM.
+    line starting with ``#``, or a number and no comma, is TUM; anything else a CSV (its
+    first line the header).
 
     Raises
     ------
@@ -96,8 +97,8 @@ def read_truth_file(path: str | Path) -> TruthFile:
         raise InputError(f"{path} holds JSON, not a truth trajectory (a CSV t,x,y,z or a TUM "
                          f"file)")
     suffix = path.suffix.lower()
-    tum = (suffix == ".tum" or (suffix not in (".csv", ".tsv")
-                                and (first.startswith("#") or "," not in first)))
+    tum = (suffix == ".tum" or (suffix not in (".csv", ".tsv") and (
+        first.startswith("#") or ("," not in first and _is_number(first.split()[0])))))
     if tum:
         times, positions, lines = _read_tum(text, path)
     else:
@@ -117,6 +118,14 @@ def read_truth_file(path: str | Path) -> TruthFile:
                          f"given twice keep one)")
     return TruthFile(path, "tum" if tum else "csv", "session" if tum else "original",
                      Truth(times, positions))
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
 
 
 def _number(text: str, what: str, path: Path, line: int) -> float:
@@ -286,7 +295,7 @@ def truth_for_tracks(read: TruthFile, tracks: Sequence[Track], origin_ns: int = 
                              f"like millimetres; give metres (divide x, y, z by 1000)")
     if not shift:
         return read.truth
-    if not -(2**63) <= first and last < 2**63:  # (met: within the tracks' int64 range)
+    if not (-(2**63) <= first and last < 2**63):  # (an int64 of ns on the session clock)
         raise InputError(f"{read.path}: times beyond the session clock's range")
     return Truth(read.truth.time_ns - np.int64(shift), read.truth.position_world)
 
