@@ -228,8 +228,12 @@ def test_eval_truth_file_errors(cli, fused, tmp_path):
                                       "0.6,1,2,0.5,cam1,smooth\n"),
          "holds the tracks of 2 methods (typeA, smooth): keep one method's rows"),
         (session, "is an MCAP session, not a truth trajectory"),
+        (_lines(tmp_path / "json.csv", '{"t": 0.5}\n'), "holds JSON"),
         (folder, "folder"),
     ]
+    binary = tmp_path / "binary.csv"
+    binary.write_bytes(b"t,x,y,z\n0.5,1,2,\xff\xfe\n")
+    cases.append((binary, "not a text file (byte 16 is not UTF-8 text)"))
     for path, words in cases:
         err = _one_line_error(cli, 1, "eval", session, "--truth", path)
         assert words in err, (path, err)
