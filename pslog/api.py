@@ -170,8 +170,10 @@ def fuse(session: Session | str | os.PathLike[str] | Detections,
         raise InputError(f"rig {rig!r:.60}: give a Rig, a built-in rig's name or a rig file")
     if options is not None and not isinstance(options, FusionOptions):
         raise InputError(f"options {options!r:.60}: give a pslog.fusion.FusionOptions")
-    if not isinstance(clock_uncertainty, bool):
+    # (numpy's bools too, np.True_: a flag taken from an array)
+    if not isinstance(clock_uncertainty, (bool, np.bool_)):
         raise InputError(f"clock_uncertainty {clock_uncertainty!r:.60}: give True or False")
+    clock_uncertainty = bool(clock_uncertainty)
     if isinstance(session, Detections):
         if rig is None:
             raise InputError("fuse(detections): give the rig the detections belong to")

@@ -10,8 +10,9 @@ a process on files it writes.
   where a truth of the user's own is compared.
 - One CSV per camera: ``--detections left.csv --detections right.csv`` imported the right
   camera's alone (the second option replaced the first) and said "2 cameras (left,
-  right)". A repeated ``--detections`` is now a command-line error, and a rig camera
-  without a row is said.
+  right)". A repeated ``--detections`` is now a command-line error unless each names its
+  camera (``cam1=left.csv``: session 40, tests/test_items40.py), and a rig camera without a
+  row is said.
 - Each camera's times on its own clock (e.g. seconds since the camera booted beside a host's
   Unix-epoch stamps): ``pslog import`` wrote a "session" of 56 years without a word, and
   ``pslog sync`` then said "camera right has 0 detections within 120 ms of one of camera
@@ -112,8 +113,9 @@ def test_export_says_which_formats_keep_the_session_clock(tmp_path):
     # eval of it (no truth) says where a truth of the user's own is compared
     first = _ok("eval", fused).splitlines()[0]
     assert first.endswith(f"(to compare with a truth of your own, e.g. motion capture: 'pslog "
-                          f"export {fused} --csv TRACKS.csv', the original times, or --tum "
-                          f"DIR for evo_ape: docs/interchange.md)"), first
+                          f"eval {fused} --truth TRUTH.csv', t,x,y,z on the original clock, "
+                          f"or 'pslog export --csv / --tum' for tools of your own: "
+                          f"docs/interchange.md)"), first
 
 
 def test_sync_regates_when_its_gating_lost_the_ball_to_far_clocks(tmp_path):
@@ -200,9 +202,11 @@ def test_one_csv_per_camera_is_not_silently_half_imported(tmp_path):
                 files[1], "-o", out)
     assert done.returncode == 2 and done.stdout == "", done
     assert done.stderr == (f"pslog import: error: argument --detections: given twice "
-                           f"({files[0]}, {files[1]}): pslog import reads one CSV holding "
-                           f"every camera's rows (column camera); join the cameras' files into "
-                           f"one first (docs/log-format.md) (see 'pslog import --help')\n")
+                           f"({files[0]}, {files[1]}) without camera names: name each camera's "
+                           f"file, --detections CAMERA=FILE (e.g. --detections cam1=left.csv "
+                           f"--detections cam2=right.csv, cameras as the rig names them), or "
+                           f"give one CSV holding every camera's rows (column camera) (see "
+                           f"'pslog import --help')\n")
     assert not out.exists()
     said = _ok("import", "--rig", "paper2", "--detections", files[1], "-o", out)
     assert f"note: {files[1]} has no frame of camera cam1: nothing of it to fuse" in said, said

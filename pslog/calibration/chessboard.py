@@ -46,7 +46,10 @@ def check_pattern(pattern: object, text: object = None) -> tuple[int, int]:
     """``pattern`` as (cols, rows) if both are whole numbers in [:data:`MIN_PATTERN_SIDE`,
     :data:`MAX_PATTERN_SIDE`], else :class:`InputError` naming it (as ``text`` if given)."""
     spelled = pattern if text is None else text
-    sides = tuple(pattern) if isinstance(pattern, (tuple, list)) else ()
+    # (a numpy array of two whole numbers too, as API callers hold sizes: np.array((9, 6)))
+    sides = (tuple(pattern) if isinstance(pattern, (tuple, list)) else
+             tuple(pattern.tolist()) if isinstance(pattern, np.ndarray) and pattern.ndim == 1
+             else ())
     if len(sides) != 2 or not all(isinstance(p, (int, np.integer)) and not isinstance(p, bool)
                                   for p in sides):
         raise InputError(f"bad chessboard pattern {spelled!r}: expected COLSxROWS of inner "

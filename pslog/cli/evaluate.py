@@ -8,7 +8,7 @@ import argparse
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from ._common import add_method_option
+    from ._common import add_method_option, declare_files
 
     parser.add_argument("session", metavar="FUSED.mcap",
                         help="fused session (from 'pslog fuse'); with ground truth (simulated "
@@ -18,7 +18,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "else the quality figures alone")
     add_method_option(parser, "only this method's track (repeat, or a comma-separated list, "
                               "for several; default: every track)")
+    parser.add_argument("--truth", metavar="TRUTH.csv|.tum",
+                        help="score against this ground truth instead of the session's own "
+                             "(motion capture, a measured trajectory): a CSV whose header "
+                             "names t (or time, timestamp), x, y, z (other columns ignored), "
+                             "times in seconds on the original clock, the clock of the CSV "
+                             "'pslog import' read (Unix-epoch stays Unix-epoch, as 'pslog "
+                             "export --csv' writes times), or a TUM file 'timestamp tx ty tz "
+                             "[qx qy qz qw]' on the session clock (as 'pslog export --tum' "
+                             "writes truth.tum); the two clocks are one unless the session was "
+                             "imported with an origin; world metres; interpolated linearly "
+                             "between its samples; a truth on the other clock is refused, "
+                             "naming the origin between them (docs/interchange.md)")
     parser.add_argument("--json", action="store_true", help="print JSON for scripts")
+    declare_files(parser, inputs=("session", "truth"))
 
 
 def run(args: argparse.Namespace) -> int:
@@ -52,6 +65,17 @@ def run(args: argparse.Namespace) -> int:
     if missing:
         raise InputError(f"no track for method(s) {', '.join(missing)} in {args.session} "
                          f"(have {', '.join(session.tracks)})")
+    truth_line = None
+    if args.truth is not None:  # a truth of one's own (motion capture), on the session clock
+        from pslog.interchange.truth_files import describe, read_truth_file, truth_for_tracks
+        from pslog.log.csvio import session_clock_origin
+
+        origin = session_clock_origin(session.metadata, session.path)
+        read = read_truth_file(args.truth)
+        own = truth is not None
+        truth = truth_for_tracks(read, [session.tracks[m] for m in methods], origin)
+        truth_line = describe(read, truth, origin) + (
+            "; the session's own truth not used" if own else "")
     # accuracy and quality of each track (the truth at its times made once for both)
     rows, quality = map(list, zip(*(assess(session.tracks[m], truth) for m in methods),
                                   strict=True))
@@ -91,13 +115,16 @@ def run(args: argparse.Namespace) -> int:
                           for r, q in zip(rows, quality, strict=True)]), indent=2,
                          allow_nan=False))
     else:
+        if truth_line is not None:
+            print(truth_line)
         if truth is None:
             print(f"{args.session} has no ground truth (only sessions of 'pslog simulate', "
                   f"'pslog record --synthetic' and 'pslog demo' have one; 'pslog live "
                   f"--synthetic' records none): no accuracy; the quality figures without it "
                   f"(to compare with a truth of your own, e.g. motion capture: 'pslog "
-                  f"export {shell_word(args.session)} --csv TRACKS.csv', the original times, "
-                  f"or --tum DIR for evo_ape: docs/interchange.md)")
+                  f"eval {shell_word(args.session)} --truth TRUTH.csv', t,x,y,z on the "
+                  f"original clock, or 'pslog export --csv / --tum' for tools of your own: "
+                  f"docs/interchange.md)")
         else:
             print(format_accuracy_table([r for r in rows if r is not None]))
         print()

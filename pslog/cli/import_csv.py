@@ -7,31 +7,46 @@ import argparse
 from ._common import add_force, add_rig, declare_files
 
 
-class _OneCsv(argparse.Action):
-    """``--detections`` given once: a second one silently replaced the first (walk39: one
-    CSV per camera, ``--detections left.csv --detections right.csv``, imported the right
+class _Detections(argparse.Action):
+    """``--detections``, repeatable as ``NAME=FILE`` (one CSV per camera). Two files without
+    camera names are refused at once: a second ``--detections`` had silently replaced the
+    first (walk39: ``--detections left.csv --detections right.csv`` imported the right
     camera's alone and said "2 cameras")."""
 
     def __call__(self, parser, namespace, values, option_string=None):
-        before = getattr(namespace, self.dest, None)
-        if before is not None:
-            parser.error(f"argument --detections: given twice ({before}, {values}): pslog "
-                         f"import reads one CSV holding every camera's rows (column camera); "
-                         f"join the cameras' files into one first (docs/log-format.md)")
-        setattr(namespace, self.dest, values)
+        given = [*(getattr(namespace, self.dest, None) or ()), values]
+        unnamed = [v for v in given if "=" not in v]
+        if len(given) > 1 and unnamed:
+            parser.error(f"argument --detections: given twice ({', '.join(given)}) without "
+                         f"camera names: name each camera's file, --detections "
+                         f"CAMERA=FILE (e.g. --detections cam1=left.csv --detections "
+                         f"cam2=right.csv, cameras as the rig names them), or give one CSV "
+                         f"holding every camera's rows (column camera)")
+        setattr(namespace, self.dest, given)
+
+
+def _detection_files(args: argparse.Namespace) -> list[str]:
+    """The files in ``--detections CAMERA=FILE`` values (inputs, beside the values as given:
+    which part is a camera is known only from the rig)."""
+    return [v.partition("=")[2] for v in getattr(args, "detections", None) or () if "=" in v]
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from pslog.rig import TIMING_PRESETS
 
     add_rig(parser)
-    parser.add_argument("--detections", required=True, metavar="DET.csv", action=_OneCsv,
+    parser.add_argument("--detections", required=True, metavar="[CAMERA=]DET.csv",
+                        action=_Detections,
                         help="detections CSV, header camera,time,u,v (optional frame,score); "
                              "time in seconds on any clock common to the cameras (negative or "
                              "Unix-epoch too: the session records its origin and 'pslog "
                              "export --detections / --csv' give the times back), pixels as "
                              "detected; rows in any order; a row with u and v empty: a "
-                             "frame without a detection")
+                             "frame without a detection. One CSV per camera: repeat it as "
+                             "CAMERA=FILE, a rig camera's name each (--detections "
+                             "cam1=left.csv --detections cam2=right.csv); such a file's "
+                             "header is time,u,v (optional frame,score), and a camera column, "
+                             "if it has one, must name that camera in every row")
     parser.add_argument("--timing", default="rig", choices=(*TIMING_PRESETS, "rig"),
                         help="set the rig's shutter offsets from a preset (default: 'rig', the "
                              "rig's own offsets); the session's timing label names the preset "
@@ -39,7 +54,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("-o", "--output", required=True, metavar="SESSION.mcap",
                         help="session file to write")
     add_force(parser)
-    declare_files(parser, inputs=("rig", "detections"), outputs=("output",),
+    declare_files(parser, inputs=("rig", "detections", _detection_files), outputs=("output",),
                   sessions=("output",))
 
 
@@ -49,6 +64,7 @@ def run(args: argparse.Namespace) -> int:
     from pslog.log.csvio import (
         CLOCK_ORIGIN_KEY,
         format_time,
+        read_camera_csvs,
         read_detections_csv,
         session_clock,
     )
@@ -58,15 +74,22 @@ def run(args: argparse.Namespace) -> int:
     rig = resolve_rig(args.rig)
     if args.timing != "rig":
         rig = apply_timing(rig, args.timing)
-    read = read_detections_csv(args.detections, rig)  # (its errors name the file)
+    named = _named_files(args.detections, rig)
+    if isinstance(named, int):  # (a bad command line, said)
+        return named
+    # (their errors name the file and line)
+    files = list(named.values()) if named else [args.detections[0]]
+    label = ", ".join(files)
+    read = (read_camera_csvs(named, rig) if named  # one CSV per camera
+            else read_detections_csv(label, rig))
     try:
         detections, origin_ns = session_clock(read)
     except InputError as exc:  # (session_clock judges the times, not the file: name it)
-        raise InputError(f"{args.detections}: {exc}") from None
+        raise InputError(f"{label}: {exc}") from None
     metadata = {CLOCK_ORIGIN_KEY: str(origin_ns)} if origin_ns else {}
     with SessionWriter(output, rig, force=args.force, timing=timing_label(rig),
-                       source=f"pslog import {args.detections}", on_error="discard",
-                       inputs=[args.detections], metadata=metadata) as writer:
+                       source=f"pslog import {' '.join(args.detections)}",
+                       on_error="discard", inputs=files, metadata=metadata) as writer:
         writer.add_detections(detections)
     n, frames = detections.n_candidates, detections.n_frames
     print(f"wrote {output}: {n} detection{'s' if n != 1 else ''} in {frames} "
@@ -80,9 +103,58 @@ def run(args: argparse.Namespace) -> int:
     unseen = [name for c, name in enumerate(rig.names)
               if not (detections.frame_camera == c).any()]
     if unseen:  # (a rig camera without a row: its CSV left out?)
-        print(f"note: {args.detections} has no frame of camera{'s' if len(unseen) > 1 else ''} "
-              f"{', '.join(unseen)}: nothing of {'them' if len(unseen) > 1 else 'it'} to fuse")
+        them = f"{'s' if len(unseen) > 1 else ''} {', '.join(unseen)}"
+        print((f"note: no --detections CAMERA=FILE for camera{them}" if named else
+               f"note: {label} has no frame of camera{them}")
+              + f": nothing of {'them' if len(unseen) > 1 else 'it'} to fuse")
     return 0
+
+
+def _named_files(values: list[str], rig) -> dict[str, str] | int:
+    """``--detections`` values as ``{camera: file}`` (the per-camera form: every value
+    ``CAMERA=FILE``), or ``{}`` for one CSV of every camera's rows; exit code 2, said, for a
+    bad command line (a name the rig lacks, a camera or file given twice, an empty name)."""
+    import os
+
+    from ._common import usage_error
+
+    def camera_of(value: str) -> str | None:
+        name, sep, _path = value.partition("=")
+        if not sep or (name not in rig.names and len(values) == 1 and os.path.exists(value)):
+            return None  # (a file named with an '=' given alone: taken whole)
+        return name
+
+    names = [camera_of(v) for v in values]
+    if len(values) == 1 and names[0] is None:
+        return {}
+    named: dict[str, str] = {}
+    for value, name in zip(values, names, strict=True):
+        path = value.partition("=")[2]
+        if name is None or name not in rig.names:
+            return usage_error("import", f"argument --detections {value}: no camera "
+                                         f"{name!r} in the rig (it has {', '.join(rig.names)}); "
+                                         f"give CAMERA=FILE, the rig's name for the camera")
+        if not path.strip():
+            return usage_error("import", f"argument --detections {value}: empty file name")
+        if name in named:
+            return usage_error("import", f"argument --detections: camera {name} given twice "
+                                         f"({named[name]}, {path})")
+        same = [c for c, p in named.items() if _same_file(p, path)]
+        if same:
+            return usage_error("import", f"argument --detections: {path} given for cameras "
+                                         f"{same[0]} and {name}: one file per camera (or one "
+                                         f"CSV of every camera's rows, given alone)")
+        named[name] = path
+    return named
+
+
+def _same_file(a: str, b: str) -> bool:
+    import os
+
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return os.path.normpath(a) == os.path.normpath(b)
 
 
 def _apart_in_time(detections) -> str | None:

@@ -17,6 +17,8 @@ Detections CSV (import and export use exactly this format)::
   numbered 0, 1, 2, ... in time order.
 - A frame without any candidate (the ball missed) is one row with ``u`` and ``v`` empty
   (``cam1,0.011111111,,,1,``): a frame, no candidate.
+- One CSV per camera (:func:`read_camera_csvs`, ``pslog import --detections NAME=FILE``):
+  the same rows without the ``camera`` column (or with it, naming that camera in every row).
 
 Export writes all six columns, times as exact decimals with 9 digits and pixels with
 ``repr`` precision, and a row for every frame without a candidate, so export -> import
@@ -157,16 +159,31 @@ def session_clock(detections: Detections) -> tuple[Detections, int]:
     return shifted, origin
 
 
-def read_detections_csv(path, rig: Rig) -> Detections:
+def read_detections_csv(path, rig: Rig, camera: str | None = None) -> Detections:
     """Parse a detections CSV (format in the module docstring) against ``rig``'s cameras.
 
     Times are the CSV's own (int64 ns, any sign); :func:`session_clock` puts them on a
     session clock for writing.
 
+    Parameters
+    ----------
+    path : the CSV file
+    rig : the rig whose cameras the rows name
+    camera : None: every row names its camera (column ``camera``, required); a camera name
+        of ``rig``: the file holds that camera's rows alone (one CSV per camera,
+        ``pslog import --detections NAME=FILE``): header ``time,u,v[,frame][,score]``, a
+        ``camera`` column optional, and where there every row must name ``camera``
+
     Raises InputError naming the line (and column) of the first malformed row or unknown
-    camera.
+    camera (or, with ``camera``, a row naming another).
     """
     path = Path(path)
+    if camera is not None and camera not in rig.names:
+        raise InputError(f"--detections {camera}={path}: unknown camera {camera!r} (rig has "
+                         f"{', '.join(rig.names)})")
+    required = _REQUIRED if camera is None else _REQUIRED[1:]
+    expected, optional = (("camera,time,u,v", "frame,score") if camera is None
+                          else ("time,u,v", "frame,score,camera"))
     check_input_file(path)  # a device or FIFO would be read for ever
     try:
         # utf-8-sig: Excel's "CSV UTF-8" and Windows editors start with a byte-order mark
@@ -189,14 +206,14 @@ def read_detections_csv(path, rig: Rig) -> Detections:
                                  f"its detections with 'pslog export {shell_word(path)} "
                                  f"--detections DET.csv')") from None
             raise InputError(f"{path}: not a text CSV file (byte {exc.start} is not UTF-8 "
-                             f"text); expected header camera,time,u,v") from None
+                             f"text); expected header {expected}") from None
         except csv.Error as exc:
             raise InputError(f"{path}: line 1: unreadable header: {exc}") from None
         if header is None:
-            raise InputError(f"{path}: empty file (expected header camera,time,u,v)")
+            raise InputError(f"{path}: empty file (expected header {expected})")
         header = [h.strip() for h in header]
         unknown = [h for h in header if h not in DETECTION_COLUMNS]
-        missing = [h for h in _REQUIRED if h not in header]
+        missing = [h for h in required if h not in header]
         if tuple(header[:len(TRACK_COLUMNS)]) == TRACK_COLUMNS:  # (pslog export --csv's)
             raise InputError(f"{path} holds fused tracks ({','.join(TRACK_COLUMNS)}: "
                              f"'pslog export --csv'), not detections: a detections CSV "
@@ -205,15 +222,17 @@ def read_detections_csv(path, rig: Rig) -> Detections:
         if unknown or missing or len(set(header)) != len(header):
             if header and header[0].startswith(("{", "[")):  # (--jsonl's, any JSON)
                 raise InputError(f"{path} holds JSON, not a detections CSV (header "
-                                 f"camera,time,u,v)")
+                                 f"{expected})")
             shown = ",".join(header)
             shown = shown if len(shown) <= 200 else shown[:200] + "..."  # (one line, short)
             unknown = unknown if len(unknown) <= 10 else [*unknown[:10], "..."]
             raise InputError(
                 f"{path}: line 1: bad header {shown!r}: expected columns "
-                f"camera,time,u,v and optionally frame,score"
+                f"{expected} and optionally {optional}"
                 + (f" (unknown: {', '.join(unknown)})" if unknown else "")
-                + (f" (missing: {', '.join(missing)})" if missing else ""))
+                + (f" (missing: {', '.join(missing)})" if missing else "")
+                + ("; one camera's file: name its camera, --detections CAMERA=FILE"
+                   if missing == ["camera"] and not unknown else ""))
         col = {name: header.index(name) for name in header}
         has_frame, has_score = "frame" in col, "score" in col
         line = 1
@@ -225,7 +244,12 @@ def read_detections_csv(path, rig: Rig) -> Detections:
                 if len(row) != len(header):
                     raise InputError(f"{path}: line {line}: expected {len(header)} fields, "
                                      f"got {len(row)}")
-                name = row[col["camera"]].strip()
+                name = row[col["camera"]].strip() if "camera" in col else str(camera)
+                if camera is not None and name != camera:
+                    raise InputError(f"{path}: line {line}: camera {name!r}, but the file "
+                                     f"was given as camera {camera}'s (--detections "
+                                     f"{camera}={path}): every row of a camera's own CSV "
+                                     f"names that camera, or the column is left out")
                 if name not in index:
                     raise InputError(f"{path}: line {line}: unknown camera {name!r} "
                                      f"(rig has {', '.join(rig.names)})")
@@ -251,6 +275,31 @@ def read_detections_csv(path, rig: Rig) -> Detections:
                                  np.asarray(frames, np.int64) if has_frame else None,
                                  np.asarray(scores, np.float64) if has_score else None, path,
                                  np.asarray(lines, np.int64), np.asarray(missed, bool))
+
+
+def read_camera_csvs(files, rig: Rig) -> Detections:
+    """One CSV per camera (``pslog import --detections NAME=FILE ...``) as one session's
+    detections: each file read by :func:`read_detections_csv` as its camera's, the frames of
+    all joined. The same detections as one CSV of every file's rows, each with its camera
+    named (``camera`` column), read by :func:`read_detections_csv`.
+
+    Parameters
+    ----------
+    files : mapping camera name -> CSV path, each camera once (any order)
+    rig : the rig the names are cameras of
+
+    Raises InputError as :func:`read_detections_csv`, naming the file and line.
+    """
+    parts = [read_detections_csv(path, rig, camera=name) for name, path in files.items()]
+    offsets = np.cumsum([0, *(d.n_frames for d in parts)])[:-1]
+    return Detections.from_frames(
+        rig.names, np.concatenate([d.frame_time_ns for d in parts]),
+        np.concatenate([d.frame_camera for d in parts]),
+        np.concatenate([d.frame_index for d in parts]),
+        np.concatenate([d.cand_frame + k for d, k in zip(parts, offsets, strict=True)]),
+        np.concatenate([d.cand_uv for d in parts]),
+        np.concatenate([d.cand_radius for d in parts]),
+        np.concatenate([d.cand_score for d in parts]))
 
 
 def _detections_from_rows(rig: Rig, cams, times, uv, frames, scores, path,

@@ -1,0 +1,315 @@
+"""A ground truth of one's own (motion capture, a measured trajectory) read for ``pslog eval
+--truth FILE``: a CSV ``t,x,y,z`` or a TUM trajectory, the formats ``pslog export`` writes.
+
+- CSV: a header naming the time column ``t`` (or ``time``, ``timestamp``) and ``x, y, z``;
+  other columns are ignored (``pslog export --csv``'s ``camera`` and quality columns), but a
+  ``method`` column must hold one method (a tracks CSV of one method, the truth of another
+  rig). Times in seconds **on the original clock**: the clock of the CSV ``pslog import``
+  read (Unix-epoch times stay Unix-epoch), as ``pslog export --csv`` and ``--detections``
+  write them; for a session not imported (simulated, recorded) it is the session clock.
+- TUM (``timestamp tx ty tz [qx qy qz qw]``, space separated, ``#`` comment lines): times
+  in seconds **on the session clock**, as ``pslog export --tum`` writes ``truth.tum`` (and
+  evo reads it); the orientation is ignored.
+
+Positions are world metres. Times are parsed exactly to the nanosecond (decimal, never
+through float64), so an exported truth read back is the same to the bit. A truth's times
+must increase strictly, every position be finite (a gap: leave its rows out; the truth is
+interpolated linearly between the samples, :meth:`pslog.records.Truth.at`), and it needs two
+samples at least. :func:`truth_for_tracks` puts it on the session clock and refuses a truth
+that shares no time with the tracks (naming both spans), one on the other clock than its
+format's (naming the offset) and one whose positions look like millimetres.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+from ..inputs import check_input_file
+from ..log._mcapio import starts_as_mcap
+from ..records import NS, Track, Truth
+
+#: the names a CSV truth's time column may have (seconds)
+TIME_COLUMNS = ("t", "time", "timestamp")
+#: a truth whose positions lie a median this far (metres) from the world origin, a hundred
+#: times further than the tracks', is taken for millimetres and refused (as ``pslog rig
+#: import`` refuses cameras beyond 100 m without ``--units``)
+MILLIMETRE_LIMIT_M = 100.0
+
+
+@dataclass(frozen=True)
+class TruthFile:
+    """A truth trajectory as read from a file, its times on the file's own clock.
+
+    Attributes
+    ----------
+    path : Path
+    format : str, ``"csv"`` or ``"tum"``
+    clock : str, ``"original"`` (CSV: the clock of the imported detections, session time +
+        the session's clock origin) or ``"session"`` (TUM)
+    truth : Truth, n >= 2 samples: time_ns (n,) int64 on that clock, strictly increasing;
+        position_world (n, 3) float64, metres, finite
+    """
+
+    path: Path
+    format: str
+    clock: str
+    truth: Truth
+
+
+def read_truth_file(path: str | Path) -> TruthFile:
+    """Read a truth trajectory (CSV ``t,x,y,z`` or TUM: the module docstring).
+
+    The format is a ``.tum`` or ``.csv`` / ``.tsv`` suffix's, else the content's: a first
+    line starting with ``#``, or a number and no comma, is TUM; anything else a CSV (its
+    first line the header).
+
+    Raises
+    ------
+    InputError : a missing or unreadable file, an MCAP session, JSON, a detections CSV, a
+        malformed line (named), times not increasing, a position not finite, fewer than two
+        samples, a tracks CSV of several methods
+    """
+    path = Path(path)
+    check_input_file(path)
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise InputError(f"cannot read {path}: {exc.strerror or exc}") from None
+    if starts_as_mcap(path):
+        raise InputError(f"{path} is an MCAP session, not a truth trajectory (a CSV t,x,y,z "
+                         f"or a TUM file; a session's own truth needs no --truth)")
+    try:
+        text = data.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise InputError(f"{path}: not a text file (byte {exc.start} is not UTF-8 text); "
+                         f"expected a CSV t,x,y,z or a TUM trajectory") from None
+    first = next((line.strip() for line in text.splitlines() if line.strip()), "")
+    if not first:
+        raise InputError(f"{path}: empty file (expected a CSV t,x,y,z or a TUM trajectory)")
+    if first.startswith(("{", "[")):
+        raise InputError(f"{path} holds JSON, not a truth trajectory (a CSV t,x,y,z or a TUM "
+                         f"file)")
+    suffix = path.suffix.lower()
+    tum = (suffix == ".tum" or (suffix not in (".csv", ".tsv") and (
+        first.startswith("#") or ("," not in first and _is_number(first.split()[0])))))
+    if tum:
+        times, positions, lines = _read_tum(text, path)
+    else:
+        times, positions, lines = _read_csv(text, path)
+    if len(times) < 2:
+        raise InputError(f"{path}: {len(times)} sample{'s' if len(times) != 1 else ''}: a "
+                         f"truth needs two at least (it is interpolated between them)")
+    step = np.diff(times)
+    bad = np.flatnonzero(step <= 0)
+    if len(bad):
+        k = int(bad[0])
+        from ..log.csvio import format_time
+
+        raise InputError(f"{path}: line {lines[k + 1]}: time {format_time(times[k + 1])} s "
+                         f"is not after line {lines[k]}'s {format_time(times[k])} s: a "
+                         f"truth's times must increase (sort the rows by time; of a time "
+                         f"given twice keep one)")
+    return TruthFile(path, "tum" if tum else "csv", "session" if tum else "original",
+                     Truth(times, positions))
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def _number(text: str, what: str, path: Path, line: int) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = None
+    if value is None or not np.isfinite(value):
+        reason = ("empty" if not text.strip() else
+                  "not a number" if value is None else "not a finite number")
+        raise InputError(f"{path}: line {line}: {what} {text!r}: {reason} (every truth "
+                         f"sample needs a position in metres: leave out the rows of times "
+                         f"without one)")
+    return value
+
+
+def _seconds(text: str, path: Path, line: int) -> int:
+    from ..log.csvio import _Invalid, _time_ns
+
+    try:
+        return _time_ns(text.strip())
+    except _Invalid as exc:
+        reason = str(exc)
+    except ValueError:
+        reason = "not a number of seconds"
+    raise InputError(f"{path}: line {line}: time {text.strip()!r}: {reason}")
+
+
+def _read_csv(text: str, path: Path) -> tuple[np.ndarray, np.ndarray, list[int]]:
+    reader = csv.reader(io.StringIO(text, newline=""))
+    try:
+        header = [h.strip() for h in next(reader)]
+    except csv.Error as exc:
+        raise InputError(f"{path}: line 1: unreadable header: {exc}") from None
+    lower = [h.lower() for h in header]
+    if {"u", "v"} <= set(lower) and "x" not in lower:
+        raise InputError(f"{path} holds detections (camera,time,u,v: pixels), not a truth "
+                         f"trajectory: a CSV t,x,y,z in metres")
+    time_col = next((lower.index(name) for name in TIME_COLUMNS if name in lower), None)
+    missing = [name for name in "xyz" if name not in lower]
+    if time_col is None or missing or len(set(lower)) != len(lower):
+        shown = ",".join(header)
+        shown = shown if len(shown) <= 200 else shown[:200] + "..."
+        raise InputError(f"{path}: line 1: bad header {shown!r}: expected columns t,x,y,z "
+                         f"(time in seconds, or named time or timestamp; x, y, z in metres; "
+                         f"other columns ignored)")
+    cols = [lower.index(name) for name in "xyz"]
+    method_col = lower.index("method") if "method" in lower else None
+    times: list[int] = []
+    positions: list[tuple[float, ...]] = []
+    lines: list[int] = []
+    methods: dict[str, int] = {}
+    line = 1
+    try:
+        for row in reader:
+            line = reader.line_num
+            if not row or all(not cell.strip() for cell in row):
+                continue
+            if len(row) != len(header):
+                raise InputError(f"{path}: line {line}: expected {len(header)} fields, got "
+                                 f"{len(row)}")
+            if method_col is not None:
+                methods.setdefault(row[method_col].strip(), line)
+            times.append(_seconds(row[time_col], path, line))
+            positions.append(tuple(_number(row[c], f"{header[c]} value", path, line)
+                                   for c in cols))
+            lines.append(line)
+    except csv.Error as exc:
+        raise InputError(f"{path}: line {line}: {exc}") from None
+    if len(methods) > 1:
+        raise InputError(f"{path} holds the tracks of {len(methods)} methods "
+                         f"({', '.join(methods)}): keep one method's rows as the truth")
+    return (np.asarray(times, np.int64), np.asarray(positions, np.float64).reshape(-1, 3),
+            lines)
+
+
+def _read_tum(text: str, path: Path) -> tuple[np.ndarray, np.ndarray, list[int]]:
+    times: list[int] = []
+    positions: list[tuple[float, ...]] = []
+    lines: list[int] = []
+    for line, raw in enumerate(text.splitlines(), start=1):
+        fields = raw.split()
+        if not fields or fields[0].startswith("#"):
+            continue
+        if len(fields) not in (4, 8):
+            raise InputError(f"{path}: line {line}: {len(fields)} fields: a TUM line is "
+                             f"'timestamp tx ty tz qx qy qz qw' (or its first four), "
+                             f"separated by spaces")
+        times.append(_seconds(fields[0], path, line))
+        positions.append(tuple(_number(fields[k], f"t{'xyz'[k - 1]} value", path, line)
+                               for k in (1, 2, 3)))
+        lines.append(line)
+    return (np.asarray(times, np.int64), np.asarray(positions, np.float64).reshape(-1, 3),
+            lines)
+
+
+def _span(first: int, last: int) -> str:
+    from ..log.csvio import format_time
+
+    return f"{format_time(first)}-{format_time(last)} s"
+
+
+def truth_for_tracks(read: TruthFile, tracks: Sequence[Track], origin_ns: int = 0) -> Truth:
+    """``read``'s truth on the session clock of ``tracks``, checked against them.
+
+    Parameters
+    ----------
+    read : a truth file (:func:`read_truth_file`)
+    tracks : the tracks it scores (each sorted by time)
+    origin_ns : the session clock's origin on the original clock, ns
+        (:func:`pslog.log.csvio.session_clock_origin`; 0: the clocks are one)
+
+    Raises
+    ------
+    InputError : a track with no point inside the truth's time span (both spans named, on
+        the file's clock), or the truth's times on the other clock (where the tracks would
+        overlap them: the origin to add or subtract named), or positions in millimetres
+    """
+    shift = int(origin_ns) if read.clock == "original" else 0
+    t = read.truth.time_ns
+    first, last = int(t[0]) - shift, int(t[-1]) - shift  # (Python ints: no overflow)
+    spans = [(track.method, int(track.time_ns[0]), int(track.time_ns[-1]))
+             for track in tracks if len(track)]
+
+    def meets(lo: int, hi: int) -> list[bool]:
+        return [bool(np.any((track.time_ns >= lo) & (track.time_ns <= hi)))
+                for track in tracks if len(track)]
+
+    met = meets(first, last)
+    if spans and not all(met):
+        from ..log.csvio import format_time
+
+        clock = ("the original clock (session time + the session's clock origin "
+                 f"{format_time(origin_ns)} s)" if read.clock == "original" and origin_ns
+                 else "the session clock")
+        other = origin_ns if shift else -origin_ns  # (the times read on the other clock)
+        if origin_ns and not any(met) and any(meets(first + other, last + other)):
+            if shift:
+                raise InputError(
+                    f"{read.path}: its times ({_span(int(t[0]), int(t[-1]))}) are on the "
+                    f"session clock, but a CSV truth's are on the original clock, as 'pslog "
+                    f"export --csv' writes them: add the session's clock origin "
+                    f"{format_time(origin_ns)} s to every time (or give the truth as a TUM "
+                    f"file, on the session clock)")
+            raise InputError(
+                f"{read.path}: its times ({_span(int(t[0]), int(t[-1]))}) are on the "
+                f"original clock, but a TUM truth's are on the session clock, as 'pslog "
+                f"export --tum' writes them: subtract the session's clock origin "
+                f"{format_time(origin_ns)} s from every time (or give the truth as a CSV "
+                f"t,x,y,z, on the original clock)")
+        if any(met):  # (one track outside the truth's span, the others not)
+            method, lo, hi = next(s for s, m in zip(spans, met, strict=True) if not m)
+            whose = f"track {method}: the truth spans {_span(int(t[0]), int(t[-1]))}, the track"
+        else:
+            lo, hi = min(s[1] for s in spans), max(s[2] for s in spans)
+            whose = f"the tracks: the truth spans {_span(int(t[0]), int(t[-1]))}, the tracks"
+        raise InputError(f"{read.path}: no time in common with {whose} "
+                         f"{_span(lo + shift, hi + shift)}, both on {clock}; nothing to score")
+    if spans:
+        truth_norm = float(np.median(np.linalg.norm(read.truth.position_world, axis=1)))
+        points = np.concatenate([track.position_world for track in tracks])
+        points = points[np.isfinite(points).all(axis=1)]
+        track_norm = float(np.median(np.linalg.norm(points, axis=1))) if len(points) else 0.0
+        if truth_norm > MILLIMETRE_LIMIT_M and truth_norm > 100 * track_norm:
+            raise InputError(f"{read.path}: its positions lie a median {truth_norm:.4g} m from "
+                             f"the world origin, the tracks' {track_norm:.3g} m: they look "
+                             f"like millimetres; give metres (divide x, y, z by 1000)")
+    if not shift:
+        return read.truth
+    if not (-(2**63) <= first and last < 2**63):  # (an int64 of ns on the session clock)
+        raise InputError(f"{read.path}: times beyond the session clock's range")
+    return Truth(read.truth.time_ns - np.int64(shift), read.truth.position_world)
+
+
+def describe(read: TruthFile, truth: Truth, origin_ns: int = 0) -> str:
+    """One line saying which truth ``pslog eval`` scores against: the file, its format and
+    clock, samples, span (on the file's clock) and sample steps."""
+    from ..log.csvio import format_time
+
+    t = read.truth.time_ns
+    step = np.diff(truth.time_ns) / NS * 1e3
+    clock = ("TUM, session clock" if read.clock == "session" else
+             f"CSV, original clock: session time + {format_time(origin_ns)} s" if origin_ns
+             else "CSV, original clock = session clock")
+    return (f"truth: {read.path} ({clock}): {len(t)} samples, {_span(int(t[0]), int(t[-1]))}, "
+            f"steps median {float(np.median(step)):.3g} ms, largest {float(step.max()):.3g} "
+            f"ms (interpolated linearly between samples)")
