@@ -271,12 +271,15 @@ def test_each_frames_all_candidates_support_and_lag_are_the_batch_arrays(causal)
 def test_rolling_shutters_offline_where_a_later_frame_is_decided_first():
     """Offline, a candidate low in a rolling shutter's frame may take its support from
     another camera's frame after it that the batch decided before its own frame (whose time
-    is its first candidate's): with 30 ms readouts, blobs in a third of the frames and a
-    static object in every view, such frames decided with a candidate rejected narrow the
-    support, and both ways agree."""
+    is its first candidate's): with 30 ms readouts, blobs in 30 % of the frames and a static
+    object in every camera's view, such frames decided with a candidate rejected narrow the
+    support (a ratio or two a session: fails when the offline form checks only the frames
+    before the time for it), and both ways agree."""
     rig = apply_timing(builtin_rig("paper3"), "typeA")
-    det, rig = session(61560, rig, duration=4.0, spurious_rate=0.35,
-                       readout_s=dict.fromkeys(rig.names, 0.03),
-                       clock_offset_s={"cam2": 0.011, "cam3": -0.013})
-    reason = assert_same(det, rig, False)
-    assert np.count_nonzero(reason >= 0) > 100
+    for seed in (61600, 61601):
+        det, rig = session(seed, rig, duration=4.0, spurious_rate=0.3,
+                           distractors=tuple((name, DISTRACTOR) for name in rig.names),
+                           readout_s=dict.fromkeys(rig.names, 0.03),
+                           clock_offset_s={"cam2": 0.011, "cam3": -0.013})
+        reason = assert_same(det, rig, False)
+        assert np.count_nonzero(reason >= 0) > 100
