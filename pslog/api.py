@@ -288,7 +288,7 @@ def sync(session: Session | str | os.PathLike[str],
         check_search_s,
         estimate_clocks,
     )
-    from .rig import check_baselines
+    from .rig import Rig, check_baselines
     from .timing import (
         REGULARIZE_AUTO_JITTER_S,
         recorded_clocks,
@@ -358,25 +358,39 @@ def sync(session: Session | str | os.PathLike[str],
                              f"zero left out of the copy")
     progress.step("choosing the ball among candidates")
     obs, gated_note, lost = _ball_candidates(detections, rig)
+    found = None  # clocks that gated the ball where the logged ones lost it
     if lost:
         # the gating at the logged clocks lost the ball itself (clocks further apart than its
         # epipolar test allows: walk39, two hosts' clocks 30 ms to 3 s apart): rough clocks
         # from each frame's best-scored candidate first (the robust fit takes a false one as
         # an outlier), and the gating again at them
+        # (session 40: offsets of seconds first scanned coarsely, by the agreement of every
+        # moving candidate with camera 1's track; the spline scan alone reaches half a
+        # frame period, and a wide --search-ms found a wrong offset)
+        start, delta, coarse_notes = _coarse_start(detections, rig)
+        rough: Rig | None
         try:
-            rough = estimate_clocks(detections.best(), rig, ("offset",), search_s,
+            rough = estimate_clocks(detections.best(), start, ("offset",), search_s,
                                     regularized=reports).rig
         except FusionError:
-            rough = None
+            # (the best-scored candidates may be a static object's, which fix no offset:
+            # the coarse scan's, within a quarter of a frame period, gates as well)
+            rough = start if np.any(delta) else None
         again = None if rough is None else _ball_candidates(detections, rough)
         if again is not None and not again[2]:
-            gated_note = (f"{again[1]}, at clocks estimated first from each frame's "
-                          f"best-scored candidate: at the logged clocks the gating lost "
-                          f"{lost[0]} of {lost[1]} frames with a candidate, the ball's too "
-                          f"(clocks further apart than it allows)")
+            moved = ", ".join(f"{cam.name} {d * 1e3:+.1f} ms"
+                              for cam, d in zip(rig.cameras, delta.tolist(), strict=True) if d)
+            gated_note = (f"{again[1]}, at clocks estimated first "
+                          + (f"by a coarse scan of the offsets ({moved}) and " if moved else "")
+                          + f"from each frame's best-scored candidate: at the logged clocks "
+                          f"the gating lost {lost[0]} of {lost[1]} frames with a candidate, "
+                          f"the ball's too (clocks further apart than it allows)")
             obs, lost = again[0], None
+            found = rough  # (the estimate below starts from its offsets)
         else:
             gated_note += "; " + _LOST_NOTE.format(lost=lost[0], seen=lost[1])
+            if coarse_notes:
+                gated_note += " (the coarse offset scan: " + "; ".join(coarse_notes) + ")"
     if gated_note:
         notes.append(gated_note)
     if len(obs) == 0:
@@ -385,6 +399,10 @@ def sync(session: Session | str | os.PathLike[str],
     # frames' span put a first sync's drift back to the recorded model where auto then did
     # not try drifts: the ball seen 10 s of a 31 s session, its drift lost in silence)
     rig, resynced = restart(obs.time_ns)
+    if found is not None:  # the offsets that gated the ball: where the estimate starts
+        rig = Rig(tuple(cam.replace(clock_offset=near.clock_offset)
+                        for cam, near in zip(rig.cameras, found.cameras, strict=True)),
+                  rig.name)
     prior_estimated = _prior_estimated(read.metadata)
     if prior_estimated:  # (a copy of an older pslog's, or synced from one since: each time)
         notes.insert(0, "synced before by a pslog that did not record the clock model it "
@@ -398,7 +416,28 @@ def sync(session: Session | str | os.PathLike[str],
     progress.step(f"choosing the clock model (auto) of {len(rig)} cameras" if estimate == ["auto"]
                   else f"estimating {', '.join(estimate)} of {len(rig)} clocks")
     try:
-        result = estimate_clocks(obs, rig, tuple(estimate), search_s, regularized=reports)
+        try:
+            result = estimate_clocks(obs, rig, tuple(estimate), search_s, regularized=reports)
+        except FusionError as exc:
+            # offsets beyond the scan's half frame period (two hosts' clocks seconds apart)
+            # where the gating did not lose the ball (one candidate a frame): the coarse scan,
+            # and the estimate again from its offsets (session 40)
+            if found is not None or isinstance(exc, ClockSpanError):
+                raise
+            start, delta, coarse_notes = _coarse_start(detections, rig)
+            if not np.any(delta):
+                raise
+            progress.step("estimating again from a coarse scan of the offsets")
+            obs = _ball_candidates(detections, start)[0]
+            try:
+                result = estimate_clocks(obs, start, tuple(estimate), search_s,
+                                         regularized=reports)
+            except FusionError:
+                raise exc from None
+            moved = ", ".join(f"{cam.name} {d * 1e3:+.1f} ms"
+                              for cam, d in zip(rig.cameras, delta.tolist(), strict=True) if d)
+            notes.append(f"estimated from a coarse scan of the offsets ({moved}): from the "
+                         f"rig's clocks the estimate failed ({exc})")
     except FusionError as exc:
         # with false candidates (a distractor) the failure may be theirs, not the ball's
         # motion's; say so
@@ -415,6 +454,25 @@ def sync(session: Session | str | os.PathLike[str],
     # as the prior lost the model before the first sync; review39)
     return SyncOutcome(result.rig, result, detections, obs, reports, tuple(notes),
                        recorded_clocks(read.rig, read.metadata)[0], prior_estimated)
+
+
+def _coarse_start(detections: Detections, rig: Rig) -> tuple[Rig, np.ndarray, list[str]]:
+    """``rig`` with each camera's clock offset moved by sync's coarse scan
+    (:func:`pslog.estimation.sync.coarse_offsets` over ±:data:`COARSE_SPAN_S`, at most the
+    span of the frames holding a candidate), the moves (m,) s and the scan's notes."""
+    from .estimation.sync import coarse_offsets
+    from .fusion._prepare import default_max_gap_s
+    from .rig import Rig
+
+    seen = detections.frame_time_ns[detections.candidates_per_frame() > 0]
+    span = 0.0 if not len(seen) else (int(seen.max()) - int(seen.min())) / NS
+    delta, notes = coarse_offsets(detections, rig, min(COARSE_SPAN_S, max(1.0, span)),
+                                  default_max_gap_s(rig))
+    if not np.any(delta):
+        return rig, delta, notes
+    return (Rig(tuple(cam.replace(clock_offset=cam.clock_offset + d)
+                      for cam, d in zip(rig.cameras, delta.tolist(), strict=True)), rig.name),
+            delta, notes)
 
 
 def _prior_estimated(metadata) -> bool:
@@ -435,6 +493,10 @@ def _prior_estimated(metadata) -> bool:
         return False
 
 
+#: the half-width of sync's coarse offset scan where its gating lost the ball at the logged
+#: clocks or its estimate failed from them (:func:`pslog.estimation.sync.coarse_offsets`;
+#: at most the span of the session's frames)
+COARSE_SPAN_S = 60.0
 #: share of the frames with a candidate that losing every candidate to sync's gating (at the
 #: logged clocks) says the clocks are likely too far apart for it (walk39: 0.3 % on one clock,
 #: 39 % with one camera's clock 30 ms off)
