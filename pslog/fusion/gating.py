@@ -3272,11 +3272,14 @@ _PREGATED_FORM = (True, 0.0)
 _PREGATED_COMMON = "common"
 
 
-def pregated(chosen: Gated, common: tuple) -> dict:
-    """A gating pass made before the fusion (:func:`pslog.fusion.default_methods`' : the
-    causal form without a wait, every choice's doubt made) and the forms' shared part
-    (:func:`gate_common`), as :func:`start_fusion`'s ``gated`` takes them."""
-    return {_PREGATED_FORM: chosen, _PREGATED_COMMON: common}
+def pregated(chosen: Gated, common: tuple, key: tuple = _PREGATED_FORM,
+             doubt: bool | str = True) -> dict:
+    """A gating pass made before the fusion (:func:`pslog.fusion.default_methods`' : by
+    default the causal form without a wait, every choice's doubt made; ``key``: its form,
+    :func:`gating_key`; ``doubt``: the doubt it was made with) and the forms' shared part
+    (:func:`gate_common`), as :func:`start_fusion`'s ``gated`` takes them (a form's pass
+    taken where its methods take that doubt)."""
+    return {key: (chosen, doubt), _PREGATED_COMMON: common}
 
 
 def start_fusion(detections: Detections, rig: Rig, methods, options=None, *,
@@ -3340,9 +3343,10 @@ def start_fusion(detections: Detections, rig: Rig, methods, options=None, *,
             doubting[key] = True if doubting.get(key) is True else METHODS[m].doubt
 
     def gated_input(key, method: str) -> tuple[Gated, Prepared | None]:  # once per form
-        made = given.pop(key, None) if doubting.get(key, False) is True else None
-        if made is not None:  # (the pass before, the same call: see the docstring)
-            gated = made
+        made = given.pop(key, None)
+        if made is not None and made[1] == doubting.get(key, False):
+            # (the pass before, the same call: see the docstring)
+            gated = made[0]
             common()  # (its use of the shared part, counted as each form's is)
         else:
             gated = gate_for(detections, rig, method, options, common,
