@@ -378,6 +378,31 @@ def test_import_one_csv_per_camera_equals_the_joined_csv(cli, fused, tmp_path):
                "-o", one)
     assert "note: no --detections CAMERA=FILE for cameras cam1, cam3: nothing of them to " \
            "fuse" in said, said
+    # a camera that saw nothing, its file a header alone (review40: the import was refused,
+    # 'no detection rows', the other cameras' rows with it): the session of the joined CSV
+    # without that camera's rows, the camera named in a note; every file empty: refused
+    blind = tmp_path / "blind.csv"
+    blind.write_text(files["cam3"].read_text().splitlines()[0] + "\n")
+    with open(det, newline="") as fh:
+        rows = list(csv.reader(fh))
+    with open(tmp_path / "two.csv", "w", newline="") as fh:
+        csv.writer(fh).writerows([rows[0], *(r for r in rows[1:] if r[0] != "cam3")])
+    two, per2 = tmp_path / "two.mcap", tmp_path / "per2.mcap"
+    _ok(cli, "import", "--rig", "paper3", "--detections", tmp_path / "two.csv", "-o", two)
+    said = _ok(cli, "import", "--rig", "paper3", "--detections", f"cam1={files['cam1']}",
+               "--detections", f"cam2={files['cam2']}", "--detections", f"cam3={blind}",
+               "-o", per2)
+    assert f"note: {blind} has no rows of camera cam3: nothing of it to fuse" in said, said
+    a, b = read_session(two), read_session(per2)
+    assert a.detections.n_frames == b.detections.n_frames > 0
+    for field in ("frame_time_ns", "frame_camera", "frame_index", "cand_frame", "cand_uv",
+                  "cand_score"):
+        assert np.array_equal(getattr(a.detections, field), getattr(b.detections, field),
+                              equal_nan=True), field
+    err = _one_line_error(cli, 1, "import", "--rig", "paper3", "--detections",
+                          f"cam3={blind}", "-o", tmp_path / "none.mcap")
+    assert err.endswith(f"{blind}: no detection rows"), err
+    assert not (tmp_path / "none.mcap").exists()
 
 
 def test_import_per_camera_errors(cli, fused, tmp_path):
