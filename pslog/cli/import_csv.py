@@ -103,10 +103,14 @@ def run(args: argparse.Namespace) -> int:
     unseen = [name for c, name in enumerate(rig.names)
               if not (detections.frame_camera == c).any()]
     if unseen:  # (a rig camera without a row: its CSV left out?)
+        for name in (n for n in unseen if n in named):  # (given: a camera that saw nothing)
+            print(f"note: {named[name]} has no rows of camera {name}: nothing of it to fuse")
+        unseen = [n for n in unseen if n not in named]
         them = f"{'s' if len(unseen) > 1 else ''} {', '.join(unseen)}"
-        print((f"note: no --detections CAMERA=FILE for camera{them}" if named else
-               f"note: {label} has no frame of camera{them}")
-              + f": nothing of {'them' if len(unseen) > 1 else 'it'} to fuse")
+        if unseen:
+            print((f"note: no --detections CAMERA=FILE for camera{them}" if named else
+                   f"note: {label} has no frame of camera{them}")
+                  + f": nothing of {'them' if len(unseen) > 1 else 'it'} to fuse")
     return 0
 
 

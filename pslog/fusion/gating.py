@@ -1744,9 +1744,20 @@ def _decide_compiled(c: _Candidates, starts: np.ndarray, ends: np.ndarray, table
         return WHOLE_COMPILED, python_s
     h_max = max(len(times) for times, _ in tables)
     k_max = max(table.shape[1] for _, table in tables)
-    if len(tables) * h_max * k_max * (9 * 8 + 8 + 8 + 1) > WHOLE_MAX_BYTES:
+    if _whole_bytes(len(tables), h_max, k_max, len(c.camera)) > WHOLE_MAX_BYTES:
         return False, python_s
     return bool(shares[1] + shares[2] >= WHOLE_FROM_SHARE), python_s
+
+
+def _whole_bytes(m: int, h_max: int, k_max: int, n: int) -> int:
+    """Bytes the whole-session compiled choice holds for ``m`` cameras of at most ``h_max``
+    frames of at most ``k_max`` candidates, ``n`` candidates in all
+    (:func:`pslog.fusion._gate_kernel.gate_session`): per frame slot the state's ``fi`` (5
+    int64) and ``fflag`` (2 int8); per candidate slot its ``ct`` (int64), ``cf`` (9 float64),
+    ``csup`` (int8) and ``session_state``'s ``rows`` (int64); per candidate the decided ratio
+    returned ((C, m) float64). (Review40: the estimate had the candidate slots alone, 61 %
+    of the bytes of a two-camera session of one candidate a frame.)"""
+    return m * h_max * (5 * 8 + 2) + m * h_max * k_max * (8 + 9 * 8 + 1 + 8) + n * m * 8
 
 
 def _sums_reproduced() -> bool:

@@ -13,11 +13,17 @@
 
 Positions are world metres. Times are parsed exactly to the nanosecond (decimal, never
 through float64), so an exported truth read back is the same to the bit. A truth's times
-must increase strictly, every position be finite (a gap: leave its rows out; the truth is
-interpolated linearly between the samples, :meth:`pslog.records.Truth.at`), and it needs two
-samples at least. :func:`truth_for_tracks` puts it on the session clock and refuses a truth
-that shares no time with the tracks (naming both spans), one on the other clock than its
-format's (naming the offset) and one whose positions look like millimetres.
+must increase strictly, and it needs two samples with a position at least; the truth is
+interpolated linearly between the samples (:meth:`pslog.records.Truth.at`). A row whose x, y
+and z are all empty (or all NaN) is a gap, as motion-capture software writes a marker it lost
+(session 40, review40): the truth is NaN there, so the points between the samples around it
+are not scored (``truth_gap``) rather than scored against a straight line across the gap (a
+lost second of a rally: smooth's max error 16 -> 646 mm). Any other position must be finite.
+A CSV is comma-separated, or tab-separated where its name ends ``.tsv`` or its header holds
+tabs and no comma (Qualisys' export). :func:`truth_for_tracks` puts it on the session clock
+and refuses a truth that shares no time with the tracks (naming both spans), one on the
+other clock than its format's (naming the offset) and one whose positions look like
+millimetres.
 """
 
 from __future__ import annotations
@@ -54,7 +60,8 @@ class TruthFile:
     clock : str, ``"original"`` (CSV: the clock of the imported detections, session time +
         the session's clock origin) or ``"session"`` (TUM)
     truth : Truth, n >= 2 samples: time_ns (n,) int64 on that clock, strictly increasing;
-        position_world (n, 3) float64, metres, finite
+        position_world (n, 3) float64, metres, finite but in a gap's rows (all NaN), two
+        rows finite at least
     """
 
     path: Path
@@ -73,8 +80,9 @@ def read_truth_file(path: str | Path) -> TruthFile:
     Raises
     ------
     InputError : a missing or unreadable file, an MCAP session, JSON, a detections CSV, a
-        malformed line (named), times not increasing, a position not finite, fewer than two
-        samples, a tracks CSV of several methods
+        malformed line (named), times not increasing, a position not finite (but a gap's:
+        x, y, z all empty or NaN), fewer than two samples with a position, a tracks CSV of
+        several methods
     """
     path = Path(path)
     check_input_file(path)
@@ -102,10 +110,14 @@ def read_truth_file(path: str | Path) -> TruthFile:
     if tum:
         times, positions, lines = _read_tum(text, path)
     else:
-        times, positions, lines = _read_csv(text, path)
-    if len(times) < 2:
-        raise InputError(f"{path}: {len(times)} sample{'s' if len(times) != 1 else ''}: a "
-                         f"truth needs two at least (it is interpolated between them)")
+        tabs = suffix == ".tsv" or ("\t" in first and "," not in first)
+        times, positions, lines = _read_csv(text, path, "\t" if tabs else ",")
+    n_known = int(np.count_nonzero(np.isfinite(positions).all(axis=1)))
+    if n_known < 2:
+        gaps = len(times) - n_known
+        raise InputError(f"{path}: {n_known} sample{'s' if n_known != 1 else ''}"
+                         f"{f' with a position ({gaps} gap rows)' if gaps else ''}: a truth "
+                         f"needs two at least (it is interpolated between them)")
     step = np.diff(times)
     bad = np.flatnonzero(step <= 0)
     if len(bad):
@@ -137,9 +149,20 @@ def _number(text: str, what: str, path: Path, line: int) -> float:
         reason = ("empty" if not text.strip() else
                   "not a number" if value is None else "not a finite number")
         raise InputError(f"{path}: line {line}: {what} {text!r}: {reason} (every truth "
-                         f"sample needs a position in metres: leave out the rows of times "
-                         f"without one)")
+                         f"sample needs a position in metres; a gap, a time without one: "
+                         f"x, y and z all empty)")
     return value
+
+
+def _position(cells: list[str], names: list[str], path: Path,
+              line: int) -> tuple[float, float, float]:
+    """A row's x, y, z: NaN where all three are empty or NaN (a gap: a marker the motion
+    capture lost), else each a finite number (:func:`_number`)."""
+    if all(not cell.strip() or cell.strip().lower() == "nan" for cell in cells):
+        return (np.nan, np.nan, np.nan)
+    x, y, z = (_number(cell, f"{name} value", path, line)
+               for cell, name in zip(cells, names, strict=True))
+    return (x, y, z)
 
 
 def _seconds(text: str, path: Path, line: int) -> int:
@@ -154,8 +177,9 @@ def _seconds(text: str, path: Path, line: int) -> int:
     raise InputError(f"{path}: line {line}: time {text.strip()!r}: {reason}")
 
 
-def _read_csv(text: str, path: Path) -> tuple[np.ndarray, np.ndarray, list[int]]:
-    reader = csv.reader(io.StringIO(text, newline=""))
+def _read_csv(text: str, path: Path,
+              delimiter: str = ",") -> tuple[np.ndarray, np.ndarray, list[int]]:
+    reader = csv.reader(io.StringIO(text, newline=""), delimiter=delimiter)
     try:
         header = [h.strip() for h in next(reader)]
     except csv.Error as exc:
@@ -190,8 +214,8 @@ def _read_csv(text: str, path: Path) -> tuple[np.ndarray, np.ndarray, list[int]]
             if method_col is not None:
                 methods.setdefault(row[method_col].strip(), line)
             times.append(_seconds(row[time_col], path, line))
-            positions.append(tuple(_number(row[c], f"{header[c]} value", path, line)
-                                   for c in cols))
+            positions.append(_position([row[c] for c in cols], [header[c] for c in cols],
+                                       path, line))
             lines.append(line)
     except csv.Error as exc:
         raise InputError(f"{path}: line {line}: {exc}") from None
@@ -215,8 +239,7 @@ def _read_tum(text: str, path: Path) -> tuple[np.ndarray, np.ndarray, list[int]]
                              f"'timestamp tx ty tz qx qy qz qw' (or its first four), "
                              f"separated by spaces")
         times.append(_seconds(fields[0], path, line))
-        positions.append(tuple(_number(fields[k], f"t{'xyz'[k - 1]} value", path, line)
-                               for k in (1, 2, 3)))
+        positions.append(_position(fields[1:4], ["tx", "ty", "tz"], path, line))
         lines.append(line)
     return (np.asarray(times, np.int64), np.asarray(positions, np.float64).reshape(-1, 3),
             lines)
@@ -285,7 +308,9 @@ def truth_for_tracks(read: TruthFile, tracks: Sequence[Track], origin_ns: int = 
         raise InputError(f"{read.path}: no time in common with {whose} "
                          f"{_span(lo + shift, hi + shift)}, both on {clock}; nothing to score")
     if spans:
-        truth_norm = float(np.median(np.linalg.norm(read.truth.position_world, axis=1)))
+        known = read.truth.position_world
+        known = known[np.isfinite(known).all(axis=1)]  # (a gap's NaN rows left out)
+        truth_norm = float(np.median(np.linalg.norm(known, axis=1)))
         points = np.concatenate([track.position_world for track in tracks])
         points = points[np.isfinite(points).all(axis=1)]
         track_norm = float(np.median(np.linalg.norm(points, axis=1))) if len(points) else 0.0
@@ -310,6 +335,9 @@ def describe(read: TruthFile, truth: Truth, origin_ns: int = 0) -> str:
     clock = ("TUM, session clock" if read.clock == "session" else
              f"CSV, original clock: session time + {format_time(origin_ns)} s" if origin_ns
              else "CSV, original clock = session clock")
+    gaps = int(np.count_nonzero(~np.isfinite(read.truth.position_world).all(axis=1)))
     return (f"truth: {read.path} ({clock}): {len(t)} samples, {_span(int(t[0]), int(t[-1]))}, "
             f"steps median {float(np.median(step)):.3g} ms, largest {float(step.max()):.3g} "
-            f"ms (interpolated linearly between samples)")
+            f"ms (interpolated linearly between samples"
+            + (f"; {gaps} gap rows: the points between the samples around them not scored"
+               if gaps else "") + ")")

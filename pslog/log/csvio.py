@@ -159,7 +159,8 @@ def session_clock(detections: Detections) -> tuple[Detections, int]:
     return shifted, origin
 
 
-def read_detections_csv(path, rig: Rig, camera: str | None = None) -> Detections:
+def read_detections_csv(path, rig: Rig, camera: str | None = None,
+                        empty: bool = False) -> Detections:
     """Parse a detections CSV (format in the module docstring) against ``rig``'s cameras.
 
     Times are the CSV's own (int64 ns, any sign); :func:`session_clock` puts them on a
@@ -173,6 +174,8 @@ def read_detections_csv(path, rig: Rig, camera: str | None = None) -> Detections
         of ``rig``: the file holds that camera's rows alone (one CSV per camera,
         ``pslog import --detections NAME=FILE``): header ``time,u,v[,frame][,score]``, a
         ``camera`` column optional, and where there every row must name ``camera``
+    empty : a file of no rows (its header alone) is read as no frames, not refused
+        (:func:`read_camera_csvs`: a camera that saw nothing)
 
     Raises InputError naming the line (and column) of the first malformed row or unknown
     camera (or, with ``camera``, a row naming another).
@@ -274,7 +277,8 @@ def read_detections_csv(path, rig: Rig, camera: str | None = None) -> Detections
                                  np.asarray(uv, np.float64).reshape(-1, 2),
                                  np.asarray(frames, np.int64) if has_frame else None,
                                  np.asarray(scores, np.float64) if has_score else None, path,
-                                 np.asarray(lines, np.int64), np.asarray(missed, bool))
+                                 np.asarray(lines, np.int64), np.asarray(missed, bool),
+                                 empty=empty)
 
 
 def read_camera_csvs(files, rig: Rig) -> Detections:
@@ -288,9 +292,16 @@ def read_camera_csvs(files, rig: Rig) -> Detections:
     files : mapping camera name -> CSV path, each camera once (any order)
     rig : the rig the names are cameras of
 
+    A file of no rows (its header alone: a camera that saw nothing) gives that camera no
+    frames, as the joined CSV would hold none of its rows (review40: it was refused, the
+    other cameras' rows with it); every file without rows is refused, naming them.
+
     Raises InputError as :func:`read_detections_csv`, naming the file and line.
     """
-    parts = [read_detections_csv(path, rig, camera=name) for name, path in files.items()]
+    parts = [read_detections_csv(path, rig, camera=name, empty=True)
+             for name, path in files.items()]
+    if all(d.n_frames == 0 for d in parts):
+        raise InputError(f"{', '.join(map(str, files.values()))}: no detection rows")
     offsets = np.cumsum([0, *(d.n_frames for d in parts)])[:-1]
     return Detections.from_frames(
         rig.names, np.concatenate([d.frame_time_ns for d in parts]),
@@ -303,13 +314,18 @@ def read_camera_csvs(files, rig: Rig) -> Detections:
 
 
 def _detections_from_rows(rig: Rig, cams, times, uv, frames, scores, path,
-                          lines, missed=None) -> Detections:
+                          lines, missed=None, empty: bool = False) -> Detections:
     """Group candidate rows into frames: one frame per distinct (camera, time).
 
     ``lines`` (n,) int64 are the rows' line numbers in the file, for error messages;
-    ``missed`` (n,) bool marks rows that stand for a frame without a candidate.
+    ``missed`` (n,) bool marks rows that stand for a frame without a candidate; ``empty``:
+    no rows give no frames (else refused).
     """
     n = len(cams)
+    if n == 0 and empty:
+        return Detections.from_frames(rig.names, np.zeros(0, np.int64), np.zeros(0, np.int32),
+                                      np.zeros(0, np.int64), np.zeros(0, np.int64),
+                                      np.zeros((0, 2)))
     if n == 0:
         raise InputError(f"{path}: no detection rows")
     keys = np.stack([cams.astype(np.int64), times], axis=1)
