@@ -7,7 +7,7 @@ process on files it writes (benchmarks/session40/walk40_notes.md).
   order, so every frame the detector wrote no row for (a miss) shifted the numbers of all
   later frames; ``pslog sync``'s line of host stamps against frame numbers (``--regularize
   auto``, on for host jitter above 0.2 ms) then moved cam1's times by up to seconds
-  ("jitter 66.634 ms"), and sync wrote a readout of -109 ms, offsets 40-46 ms off and points
+  ("jitter 66.634 ms"), and sync wrote a readout of -109 ms, offsets 46-47 ms off and points
   12 cm off, without a word. Import now numbers frames from their times (a gap of k frame
   periods skips k - 1 numbers), and the session is the one the frame column gives.
 - Frame numbers that skip no missed frame all the same (a ``frame`` column counting the
@@ -168,3 +168,38 @@ def test_sync_still_regularizes_dropped_frames_and_heavy_jitter(tmp_path):
     said = done.stdout + done.stderr  # (the notes: stdout with the table)
     assert "skip no missed frame" not in said, said
     assert said.count("host stamps regularized") == 3, said
+
+
+def _truth_csv(path: Path, session: Path, add_s: str) -> None:
+    truth = read_session(session).truth
+    with open(path, "w", newline="") as fh:
+        out = csv.writer(fh)
+        out.writerow(["t", "x", "y", "z"])
+        for t, p in zip(truth.time_ns.tolist(), truth.position_world.tolist(), strict=True):
+            out.writerow([f"{Decimal(t) / 10**9 + Decimal(add_s):.9f}", *map(repr, p)])
+
+
+def test_eval_says_a_truth_whose_clock_is_off_the_cameras(tmp_path):
+    """A mocap truth 4 ms late on the cameras' clock (another host's Unix time): eval scores
+    it as given and says in a note that the tracks fit it best with its times moved by
+    -4 ms (within 0.3 ms), with the median errors there and as given; the truth on the
+    cameras' clock: no note. Fails with the shift's sign flipped (+4 ms said) or no note."""
+    raw, fused = tmp_path / "raw.mcap", tmp_path / "fused.mcap"
+    _ok("simulate", "--rig", "paper3", "--timing", "typeA", "--motion", "rally", "--duration",
+        "4", "--noise-px", "0.3", "--seed", "64012", "-o", raw)
+    _ok("fuse", raw, "--method", "smooth,typeA", "-o", fused)
+    _truth_csv(tmp_path / "late.csv", raw, "0.004")
+    _truth_csv(tmp_path / "same.csv", raw, "0")
+    out = _ok("eval", fused, "--truth", tmp_path / "late.csv")
+    notes = [line for line in out.splitlines() if line.startswith("note: the tracks fit")]
+    assert len(notes) == 1, out
+    moved = float(notes[0].split("moved by ")[1].split(" ms")[0])
+    assert abs(moved + 4.0) < 0.3, notes[0]
+    given = json.loads(_ok("eval", fused, "--truth", tmp_path / "late.csv", "--json"))
+    same = json.loads(_ok("eval", fused, "--truth", tmp_path / "same.csv", "--json"))
+    smooth = {r["method"]: r["median_mm"] for r in given}["smooth"]
+    assert f"{smooth:.3g} mm as given" in notes[0], notes[0]
+    assert smooth > 2 * {r["method"]: r["median_mm"] for r in same}["smooth"]
+    done = _run("eval", fused, "--truth", tmp_path / "late.csv", "--json")
+    assert "note: the tracks fit this truth best" in done.stderr  # (stdout: the JSON alone)
+    assert "note: the tracks fit" not in _ok("eval", fused, "--truth", tmp_path / "same.csv")
