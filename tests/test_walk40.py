@@ -203,3 +203,27 @@ def test_eval_says_a_truth_whose_clock_is_off_the_cameras(tmp_path):
     done = _run("eval", fused, "--truth", tmp_path / "late.csv", "--json")
     assert "note: the tracks fit this truth best" in done.stderr  # (stdout: the JSON alone)
     assert "note: the tracks fit" not in _ok("eval", fused, "--truth", tmp_path / "same.csv")
+
+
+def test_truth_on_a_clock_of_its_own_and_in_milliseconds_said(tmp_path):
+    """A session imported on Unix-epoch seconds, a mocap CSV whose times count from the
+    capture's own start: refused in one line that no longer tells only to add the session's
+    origin (which put the truth 0.437 s off here) but names the clock of its own and the
+    tracks' span on the original clock; a mocap on Unix milliseconds: refused, the unit
+    named (before: only "beyond the range of times")."""
+    files, raw = _lab_csvs(tmp_path, frame="camera")
+    _import(files, tmp_path / "lab.mcap")
+    _ok("fuse", tmp_path / "lab.mcap", "--method", "typeA", "-o", tmp_path / "fused.mcap")
+    _truth_csv(tmp_path / "own.csv", raw, "0")  # (0-6 s: the truth's own start)
+    done = _run("eval", tmp_path / "fused.mcap", "--truth", tmp_path / "own.csv")
+    lines = done.stderr.strip().splitlines()
+    assert done.returncode == 1 and len(lines) == 1, done.stderr
+    assert "if they are session times, add the session's clock origin" in lines[0]
+    assert "times counted from the truth's own start" in lines[0]
+    assert "the tracks span 17649216" in lines[0], lines[0]
+    with open(tmp_path / "ms.csv", "w") as fh:
+        fh.write("t,x,y,z\n1764921600440.100,0.5,1.0,0.03\n1764921600448.433,0.5,1.0,0.05\n")
+    done = _run("eval", tmp_path / "fused.mcap", "--truth", tmp_path / "ms.csv")
+    lines = done.stderr.strip().splitlines()
+    assert done.returncode == 1 and len(lines) == 1, done.stderr
+    assert "a Unix time in milliseconds or microseconds? give seconds" in lines[0], lines[0]

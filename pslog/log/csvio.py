@@ -78,7 +78,10 @@ def _time_ns(text: str) -> int:
         raise _Invalid("not a finite number of seconds")
     # compare before scaling: a huge exponent would overflow the decimal context
     if value.copy_abs() > _MAX_TIME_S:  # copy_abs: exact, no context
-        raise _Invalid(f"beyond the range of times (±{float(_MAX_TIME_S):.3g} s)")
+        # (a Unix time in ms, 1.76e12, or µs: walk40's mocap was refused without a hint)
+        unit = ("; a Unix time in milliseconds or microseconds? give seconds"
+                if value.copy_abs() < _MAX_TIME_S * 10**6 else "")
+        raise _Invalid(f"beyond the range of times (±{float(_MAX_TIME_S):.3g} s){unit}")
     # exact: the decimal context has 28 digits, an int64 of nanoseconds at most 19
     ns = int((value * NS).to_integral_value(rounding=ROUND_HALF_EVEN))
     if not -(2**63) < ns < 2**63:
