@@ -227,3 +227,23 @@ def test_truth_on_a_clock_of_its_own_and_in_milliseconds_said(tmp_path):
     lines = done.stderr.strip().splitlines()
     assert done.returncode == 1 and len(lines) == 1, done.stderr
     assert "a Unix time in milliseconds or microseconds? give seconds" in lines[0], lines[0]
+
+
+def test_import_says_shutters_off_the_rigs_offsets(tmp_path):
+    """The lab's CSVs (cam2's clock 4 ms off, on a type-A rig: its shutter 4 ms from the
+    rig's 11.1 ms) imported: a note names cam2, its phase and the rig's, and the sync
+    command; a genlocked session's export imported: no such note. Fails without the note."""
+    files, _ = _lab_csvs(tmp_path, frame="camera")
+    out = _import(files, tmp_path / "lab.mcap")
+    notes = [line for line in out.splitlines() if line.startswith("note: the times put")]
+    assert len(notes) == 1 and " ms (rig 11.1 ms)" in notes[0], out
+    phase = float(notes[0].split("shutters of cam2 ")[1].split(" ms")[0])
+    assert abs(phase - (11.111 - 4.0)) < 0.5, notes[0]  # (host jitter 1 ms, 10 % misses)
+    assert "cam3" not in notes[0] and "'pslog sync " in notes[0], notes[0]
+    raw, det = tmp_path / "g.mcap", tmp_path / "g.csv"
+    _ok("simulate", "--rig", "paper3", "--timing", "typeA", "--motion", "spiral", "--miss-rate",
+        "0.1", "--seed", "64013", "-o", raw)
+    _ok("export", raw, "--detections", det)
+    out = _ok("import", "--rig", "paper3", "--timing", "typeA", "--detections", det, "-o",
+              tmp_path / "gi.mcap")
+    assert "note: the times put" not in out, out
