@@ -228,5 +228,5 @@ def _shift_note(truth, tracks) -> str | None:
             f"{found.shift_s * 1e3:+.2f} ms ({found.method}'s median error "
             f"{found.median_mm:.3g} mm there, {found.median_given_mm:.3g} mm as given): the "
             f"truth's clock may be that far off the cameras' (the first camera's, which "
-            f"'pslog sync' keeps); the figures are as given (put the truth's times on the "
-            f"cameras' clock to score the fusion alone)")
+            f"'pslog sync' keeps), or the tracks' times off the ball's (clocks never synced, "
+            f"rolling shutters' readouts not estimated); the figures are as given")

@@ -334,7 +334,7 @@ _SHIFT_FINE_S = 0.05e-3
 #: millisecond (the tracks' own timing errors), below both.
 SHIFT_NOTE_S = 1e-3
 #: The search scores at most this many of the track's points, evenly spread.
-_SHIFT_POINTS = 2000
+_SHIFT_POINTS = 1000
 SHIFT_NOTE_GAIN = 0.2
 
 
@@ -383,42 +383,42 @@ def _median_errors(truth: Truth, time_s: np.ndarray, points: np.ndarray,
 
 def truth_clock_shift(truth: Truth, tracks: Sequence[Track]) -> TruthShift | None:
     """How far the truth's clock seems off the tracks': the time shift of the truth (within
-    ±:data:`SHIFT_SEARCH_S`) that gives the track most accurate as given its smallest
-    median error, or None (no track with 10 finite points in the truth's span).
+    ±:data:`SHIFT_SEARCH_S`) that gives a track its smallest median error, on the track
+    whose smallest median is the smallest of all; None: no track with 10 finite points in
+    the truth's span.
 
     A motion-capture truth on a clock of its own (another host's Unix time, a few ms off the
     first camera's; a clock counted from the capture's start) moves every error by the
     ball's speed times the offset: 4 ms at 5 m/s is 2 cm, which ``pslog eval`` would
     charge to the fusion (walk40). The median of the distances is robust to a track's few
-    false points. Not a correction: ``pslog eval`` says it (:attr:`TruthShift.notable`) and
-    scores the truth as given.
+    false points; the track best at its own shift, not the best as given (a method lagging
+    the ball looked best against a late truth and put the shift 0.5 ms off). Not a
+    correction: ``pslog eval`` says it (:attr:`TruthShift.notable`) and scores the truth as
+    given.
     """
-    best: tuple[float, Track] | None = None
+    coarse = np.arange(-SHIFT_SEARCH_S, SHIFT_SEARCH_S + _SHIFT_COARSE_S / 2, _SHIFT_COARSE_S)
+    best = None
     for track in tracks:
-        ok = np.isfinite(track.position_world).all(axis=1)
-        if np.count_nonzero(ok) < 10:
-            continue
+        ok = np.flatnonzero(np.isfinite(track.position_world).all(axis=1))
         given = truth.at(track.time_ns[ok])
         inside = np.isfinite(given).all(axis=1)
         if np.count_nonzero(inside) < 10:
             continue
-        med = float(np.median(np.linalg.norm(track.position_world[ok][inside]
-                                             - given[inside], axis=1)))
-        if best is None or med < best[0]:
-            best = (med, track)
+        med0 = float(np.median(np.linalg.norm(track.position_world[ok][inside]
+                                              - given[inside], axis=1)))
+        if len(ok) > _SHIFT_POINTS:  # (evenly over the track: a 90-minute match in ~0.2 s)
+            ok = ok[np.linspace(0, len(ok) - 1, _SHIFT_POINTS).round().astype(np.int64)]
+        time_s = (track.time_ns[ok] - truth.time_ns[0]) / NS
+        points = track.position_world[ok]
+        errors = _median_errors(truth, time_s, points, coarse)
+        if not np.isfinite(errors).any():
+            continue
+        i = int(np.nanargmin(errors))
+        if best is None or errors[i] < best[0]:
+            best = (float(errors[i]), coarse[i], track, time_s, points, med0)
     if best is None:
         return None
-    med0, track = best
-    ok = np.flatnonzero(np.isfinite(track.position_world).all(axis=1))
-    if len(ok) > _SHIFT_POINTS:  # (evenly over the track: a 90-minute match in ~0.3 s)
-        ok = ok[np.linspace(0, len(ok) - 1, _SHIFT_POINTS).round().astype(np.int64)]
-    time_s = (track.time_ns[ok] - truth.time_ns[0]) / NS
-    points = track.position_world[ok]
-    coarse = np.arange(-SHIFT_SEARCH_S, SHIFT_SEARCH_S + _SHIFT_COARSE_S / 2, _SHIFT_COARSE_S)
-    errors = _median_errors(truth, time_s, points, coarse)
-    if not np.isfinite(errors).any():
-        return None
-    d0 = coarse[int(np.nanargmin(errors))]
+    _, d0, track, time_s, points, med0 = best
     fine = d0 + np.arange(-_SHIFT_COARSE_S, _SHIFT_COARSE_S + _SHIFT_FINE_S / 2, _SHIFT_FINE_S)
     errors = _median_errors(truth, time_s, points, fine)
     i = int(np.nanargmin(errors))
