@@ -247,3 +247,22 @@ def test_import_says_shutters_off_the_rigs_offsets(tmp_path):
     out = _ok("import", "--rig", "paper3", "--timing", "typeA", "--detections", det, "-o",
               tmp_path / "gi.mcap")
     assert "note: the times put" not in out, out
+
+
+def test_view_of_the_import_beside_its_synced_fusion(tmp_path):
+    """``pslog view lab.mcap fused.mcap``, the fused file made from the synced copy (host
+    stamps regularized): the note says they are the same frames at other times and how to
+    view the fused file with its clocks, not "may come from another session" (which sent
+    the lab looking for one); the .rrd written. Fails with the former note."""
+    files, _ = _lab_csvs(tmp_path, frame="camera")
+    _import(files, tmp_path / "lab.mcap")
+    _ok("sync", tmp_path / "lab.mcap", "-o", tmp_path / "synced.mcap", "--estimate", "offset")
+    _ok("fuse", tmp_path / "synced.mcap", "--method", "typeA", "-o", tmp_path / "fused.mcap")
+    done = _run("view", tmp_path / "lab.mcap", tmp_path / "fused.mcap", "--frames", "none",
+                "--save", tmp_path / "v.rrd")
+    assert done.returncode == 0, done.stderr
+    said = done.stdout + done.stderr
+    assert "fused.mcap: the same frames as " in said, said
+    assert "host stamps 'pslog sync' regularized" in said and "'pslog view " in said, said
+    assert "may come from another session" not in said, said
+    assert (tmp_path / "v.rrd").stat().st_size > 0
