@@ -266,3 +266,22 @@ def test_view_of_the_import_beside_its_synced_fusion(tmp_path):
     assert "host stamps 'pslog sync' regularized" in said and "'pslog view " in said, said
     assert "may come from another session" not in said, said
     assert (tmp_path / "v.rrd").stat().st_size > 0
+
+
+def test_frames_numbered_by_the_rigs_period_when_the_ball_was_seen_in_few(tmp_path):
+    """A camera that wrote rows for fewer than half its frames (steps of 2 frame periods
+    mostly, some of 1 and 3; 0.5 ms of jitter): its frame numbers are its frames' (time /
+    period), the median step taken as 2 periods of the rig's 30 fps. Fails when the median
+    step is taken as one period (a step of 3 periods, 1.5 of those, numbered 2 or 1)."""
+    rng = np.random.default_rng(64014)
+    frames = np.cumsum(rng.choice([1, 2, 2, 2, 3], size=200))
+    times = frames / 30.0 + rng.normal(0.0, 0.5e-3, len(frames))
+    path = tmp_path / "cam1.csv"
+    with open(path, "w", newline="") as fh:
+        out = csv.writer(fh)
+        out.writerow(["time", "u", "v"])
+        for t in times:
+            out.writerow([f"{t + 5.0:.6f}", "320.5", "240.5"])
+    _ok("import", "--rig", "paper2", "--detections", f"cam1={path}", "-o", tmp_path / "s.mcap")
+    numbers = _frame_numbers(tmp_path / "s.mcap")["cam1"]
+    assert np.array_equal(numbers, frames - frames[0])
