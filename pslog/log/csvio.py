@@ -364,7 +364,7 @@ def _frames_from_times(rig: Rig, frame_camera, frame_time) -> np.ndarray:
     a ball so leaves a gap in the numbers, as a ``frame`` column would: numbered 0, 1, 2, ...
     (before session 40) a session's misses shifted every later frame's number, and ``pslog
     sync``'s line of host stamps against frame numbers (``--regularize``) then moved every
-    time by up to seconds (walk40: 5 % misses, offsets 40 ms off, points 12 cm off).
+    time by up to seconds (walk40: 5 % misses, offsets 46-47 ms off, points 12 cm off).
 
     ``frame_camera``, ``frame_time`` (n,) sorted by (camera, time), times distinct within
     a camera. Returns ``frame_index`` (n,) int64.
