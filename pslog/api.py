@@ -345,6 +345,16 @@ def sync(session: Session | str | os.PathLike[str],
                 continue
             _, report = regularize_times(detections.frame_time_ns[rows],
                                          detections.frame_index[rows])
+            astray = _stamps_astray(cam.name, detections.frame_time_ns[rows],
+                                    detections.frame_index[rows])
+            if astray is not None:
+                # (frame numbers that skip no missed frame: a line through them moved every
+                # time by up to seconds, in silence; walk40)
+                if regularize == "on":
+                    raise InputError(f"{read.path}: {astray} cannot be regularized "
+                                     f"(--regularize on)")
+                notes.append(f"{astray} are not regularized")
+                continue
             if regularize == "on" or report.jitter_s > REGULARIZE_AUTO_JITTER_S:
                 wanted.append(cam.name)
         if wanted:
@@ -473,6 +483,47 @@ def _coarse_start(detections: Detections, rig: Rig) -> tuple[Rig, np.ndarray, li
     return (Rig(tuple(cam.replace(clock_offset=cam.clock_offset + d)
                       for cam, d in zip(rig.cameras, delta.tolist(), strict=True)), rig.name),
             delta, notes)
+
+
+#: Steps between a camera's consecutive frame numbers longer than this many frame periods
+#: (the median step per number) count as long, shorter than 2 minus it as short.
+_LONG_STEP = 1.5
+
+
+def _stamps_astray(name: str, time_ns: np.ndarray, frame_index: np.ndarray) -> str | None:
+    """Why a camera's host stamps cannot be regularized against its frame numbers, or None.
+
+    A line of stamps against frame numbers (:func:`pslog.timing.regularize_times`) assumes
+    the numbers count the camera's frames, a dropped one leaving a gap. Numbers that skip
+    nothing where frames are missing (a detector's row counter; an import without a
+    ``frame`` column before session 40, numbered 0, 1, 2, ...) make steps of two frame
+    periods or more per number that no short step makes up for, whereas host jitter makes
+    as many short steps as long ones. Such steps in excess (more than 3 and 3 standard
+    deviations of the count) say the numbers do not count the frames: the line would move
+    every time by up to seconds (walk40: 5 % misses numbered away, 66 ms "jitter", a
+    readout of -109 ms and points 12 cm off, nothing said).
+    """
+    order = np.argsort(frame_index, kind="stable")
+    dk = np.diff(frame_index[order]).astype(np.float64)
+    dt = np.diff(time_ns[order]).astype(np.float64)
+    step = dk > 0
+    if np.count_nonzero(step) < 3:
+        return None
+    per = dt[step] / dk[step]
+    period = float(np.median(per))
+    if not period > 0:
+        return None
+    long = int(np.count_nonzero(per > _LONG_STEP * period))
+    short = int(np.count_nonzero(per < (2.0 - _LONG_STEP) * period))
+    excess = long - short
+    if excess <= max(3.0, 3.0 * float(np.sqrt(long + short))):
+        return None
+    return (f"{name}: {long} of its {len(per)} steps from one frame number to the next span "
+            f"{_LONG_STEP:g} frame periods or more (a period: {period / 1e6:.4g} ms, the "
+            f"median) and {short} under {2.0 - _LONG_STEP:g}: its frame numbers skip no "
+            f"missed frame (host jitter makes as many short steps as long ones; a frame "
+            f"column counting the detector's rows, not the camera's frames?), so its host "
+            f"stamps")
 
 
 def _prior_estimated(metadata) -> bool:

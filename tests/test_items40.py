@@ -260,7 +260,7 @@ def test_eval_truth_on_the_clock_export_writes(cli, fused, tmp_path):
                      add_s=Decimal("0.25"))
     err = _one_line_error(cli, 1, "eval", fused_unix, "--truth",
                           tmp_path / "session_truth.csv")
-    assert "are on the session clock, but a CSV truth's are on the original clock" in err, err
+    assert "span the session clock's, but a CSV truth's are on the original clock" in err, err
     assert "add the session's clock origin 1764860000.000000000 s to every time" in err, err
     with open(tmp_path / "unix.tum", "w") as fh:
         for t, (x, y, z) in zip(truth.time_ns.tolist(), truth.position_world.tolist(),

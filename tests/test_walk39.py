@@ -87,7 +87,11 @@ def test_cameras_on_their_own_clocks_are_said_at_import_and_sync(tmp_path):
 def test_cameras_on_one_clock_import_without_a_note(tmp_path):
     common = _shifted_csv(tmp_path, "0.004")  # 4 ms apart: one clock, synced later
     out = _ok("import", "--rig", "paper2", "--detections", common, "-o", tmp_path / "s.mcap")
-    assert "note" not in out, out
+    # (no note that the times are not on one clock; since session 40 a note that the
+    # shutters are not where the rig's offsets, 0, plan them: tests/test_walk40.py)
+    notes = [line for line in out.splitlines() if line.startswith("note")]
+    assert len(notes) == 1 and notes[0].startswith("note: the times put the shutters of cam2 ")
+    assert "do not overlap" not in out, out
 
 
 def test_export_says_which_formats_keep_the_session_clock(tmp_path):

@@ -286,13 +286,21 @@ def truth_for_tracks(read: TruthFile, tracks: Sequence[Track], origin_ns: int = 
                  else "the session clock")
         other = origin_ns if shift else -origin_ns  # (the times read on the other clock)
         if origin_ns and not any(met) and any(meets(first + other, last + other)):
+            # (times counted from the truth's own start, a mocap's, meet the session
+            # clock's span too: adding the origin then put them 0.437 s off, in silence;
+            # walk40)
+            lo = min(s[1] for s in spans) + origin_ns
+            hi = max(s[2] for s in spans) + origin_ns
+            own = (f"; times counted from the truth's own start (a motion-capture "
+                   f"system's clock) are on neither clock: put them on the cameras' (the "
+                   f"tracks span {_span(lo, hi)} on the original clock) first")
             if shift:
                 raise InputError(
-                    f"{read.path}: its times ({_span(int(t[0]), int(t[-1]))}) are on the "
-                    f"session clock, but a CSV truth's are on the original clock, as 'pslog "
-                    f"export --csv' writes them: add the session's clock origin "
-                    f"{format_time(origin_ns)} s to every time (or give the truth as a TUM "
-                    f"file, on the session clock)")
+                    f"{read.path}: its times ({_span(int(t[0]), int(t[-1]))}) span the "
+                    f"session clock's, but a CSV truth's are on the original clock, as 'pslog "
+                    f"export --csv' writes them: if they are session times, add the session's "
+                    f"clock origin {format_time(origin_ns)} s to every time (or give the truth "
+                    f"as a TUM file, on the session clock){own}")
             raise InputError(
                 f"{read.path}: its times ({_span(int(t[0]), int(t[-1]))}) are on the "
                 f"original clock, but a TUM truth's are on the session clock, as 'pslog "
@@ -341,3 +349,105 @@ def describe(read: TruthFile, truth: Truth, origin_ns: int = 0) -> str:
             f"ms (interpolated linearly between samples"
             + (f"; {gaps} gap rows: the points between the samples around them not scored"
                if gaps else "") + ")")
+
+
+#: :func:`truth_clock_shift` searches the truth's clock offset within ±this many seconds, on
+#: a grid of :data:`_SHIFT_COARSE_S`, then around the best within one step, on a grid of
+#: :data:`_SHIFT_FINE_S`.
+SHIFT_SEARCH_S = 1.0
+_SHIFT_COARSE_S = 2e-3
+_SHIFT_FINE_S = 0.05e-3
+#: The shift is said when it is at least this (seconds) and lowers the median error by at
+#: least this share: a truth on the cameras' clock finds its best within a fraction of a
+#: millisecond (the tracks' own timing errors), below both.
+SHIFT_NOTE_S = 1e-3
+#: The search scores at most this many of the track's points, evenly spread.
+_SHIFT_POINTS = 1000
+SHIFT_NOTE_GAIN = 0.2
+
+
+@dataclass(frozen=True)
+class TruthShift:
+    """The time shift of a truth that best fits a track (:func:`truth_clock_shift`).
+
+    Attributes
+    ----------
+    method : str, the track it was measured on (the most accurate as given)
+    shift_s : float, seconds to add to the truth's times for the smallest median error
+    median_mm : float, the track's median error with the truth shifted so
+    median_given_mm : float, its median error with the truth as given
+    """
+
+    method: str
+    shift_s: float
+    median_mm: float
+    median_given_mm: float
+
+    @property
+    def notable(self) -> bool:
+        """A shift a truth on the cameras' clock would not show: said by ``pslog eval``."""
+        return (abs(self.shift_s) >= SHIFT_NOTE_S
+                and self.median_mm <= (1.0 - SHIFT_NOTE_GAIN) * self.median_given_mm)
+
+
+def _median_errors(truth: Truth, time_s: np.ndarray, points: np.ndarray,
+                   shifts: np.ndarray) -> np.ndarray:
+    """Median distance (m) of ``points`` at ``time_s`` (seconds, relative to the truth's
+    first sample) from the truth with its times moved by each of ``shifts`` (seconds);
+    NaN where fewer than half the points fall inside the moved truth's span."""
+    t_truth = (truth.time_ns - truth.time_ns[0]) / NS
+    out = np.full(len(shifts), np.nan)
+    for i, d in enumerate(shifts):
+        t = time_s - d  # the moved truth at t is the given one at t - d
+        inside = (t >= t_truth[0]) & (t <= t_truth[-1])
+        if np.count_nonzero(inside) * 2 < len(t):
+            continue
+        ti = t[inside]
+        at = np.stack([np.interp(ti, t_truth, truth.position_world[:, k]) for k in range(3)],
+                      axis=1)
+        out[i] = float(np.median(np.linalg.norm(points[inside] - at, axis=1)))
+    return out
+
+
+def truth_clock_shift(truth: Truth, tracks: Sequence[Track]) -> TruthShift | None:
+    """How far the truth's clock seems off the tracks': the time shift of the truth (within
+    ±:data:`SHIFT_SEARCH_S`) that gives a track its smallest median error, on the track
+    whose smallest median is the smallest of all; None: no track with 10 finite points in
+    the truth's span.
+
+    A motion-capture truth on a clock of its own (another host's Unix time, a few ms off the
+    first camera's; a clock counted from the capture's start) moves every error by the
+    ball's speed times the offset: 4 ms at 5 m/s is 2 cm, which ``pslog eval`` would
+    charge to the fusion (walk40). The median of the distances is robust to a track's few
+    false points; the track best at its own shift, not the best as given (a method lagging
+    the ball looked best against a late truth and put the shift 0.5 ms off). Not a
+    correction: ``pslog eval`` says it (:attr:`TruthShift.notable`) and scores the truth as
+    given.
+    """
+    coarse = np.arange(-SHIFT_SEARCH_S, SHIFT_SEARCH_S + _SHIFT_COARSE_S / 2, _SHIFT_COARSE_S)
+    best = None
+    for track in tracks:
+        ok = np.flatnonzero(np.isfinite(track.position_world).all(axis=1))
+        given = truth.at(track.time_ns[ok])
+        inside = np.isfinite(given).all(axis=1)
+        if np.count_nonzero(inside) < 10:
+            continue
+        med0 = float(np.median(np.linalg.norm(track.position_world[ok][inside]
+                                              - given[inside], axis=1)))
+        if len(ok) > _SHIFT_POINTS:  # (evenly over the track: a 90-minute match in ~0.2 s)
+            ok = ok[np.linspace(0, len(ok) - 1, _SHIFT_POINTS).round().astype(np.int64)]
+        time_s = (track.time_ns[ok] - truth.time_ns[0]) / NS
+        points = track.position_world[ok]
+        errors = _median_errors(truth, time_s, points, coarse)
+        if not np.isfinite(errors).any():
+            continue
+        i = int(np.nanargmin(errors))
+        if best is None or errors[i] < best[0]:
+            best = (float(errors[i]), coarse[i], track, time_s, points, med0)
+    if best is None:
+        return None
+    _, d0, track, time_s, points, med0 = best
+    fine = d0 + np.arange(-_SHIFT_COARSE_S, _SHIFT_COARSE_S + _SHIFT_FINE_S / 2, _SHIFT_FINE_S)
+    errors = _median_errors(truth, time_s, points, fine)
+    i = int(np.nanargmin(errors))
+    return TruthShift(track.method, float(fine[i]), float(errors[i]) * 1e3, med0 * 1e3)
