@@ -39,6 +39,7 @@ import numpy as np
 from ..errors import InputError
 from ..inputs import check_input_file
 from ..log._mcapio import starts_as_mcap
+from ..log.csvio import csv_rows
 from ..records import NS, Track, Truth
 
 #: the names a CSV truth's time column may have (seconds)
@@ -202,23 +203,13 @@ def _read_csv(text: str, path: Path,
     positions: list[tuple[float, ...]] = []
     lines: list[int] = []
     methods: dict[str, int] = {}
-    line = 1
-    try:
-        for row in reader:
-            line = reader.line_num
-            if not row or all(not cell.strip() for cell in row):
-                continue
-            if len(row) != len(header):
-                raise InputError(f"{path}: line {line}: expected {len(header)} fields, got "
-                                 f"{len(row)}")
-            if method_col is not None:
-                methods.setdefault(row[method_col].strip(), line)
-            times.append(_seconds(row[time_col], path, line))
-            positions.append(_position([row[c] for c in cols], [header[c] for c in cols],
-                                       path, line))
-            lines.append(line)
-    except csv.Error as exc:
-        raise InputError(f"{path}: line {line}: {exc}") from None
+    for line, row in csv_rows(reader, len(header), path):
+        if method_col is not None:
+            methods.setdefault(row[method_col].strip(), line)
+        times.append(_seconds(row[time_col], path, line))
+        positions.append(_position([row[c] for c in cols], [header[c] for c in cols],
+                                   path, line))
+        lines.append(line)
     if len(methods) > 1:
         raise InputError(f"{path} holds the tracks of {len(methods)} methods "
                          f"({', '.join(methods)}): keep one method's rows as the truth")

@@ -132,6 +132,26 @@ def _cell(row: list[str], col: dict[str, int], key: str, path: Path, line: int):
     raise InputError(f"{path}: line {line}: bad {key} value {text!r}: {reason}")
 
 
+def csv_rows(reader, n_fields: int, path):
+    """Each row of a ``csv.reader`` with a value, with its line number (blank rows skipped),
+    of ``n_fields`` fields: an :class:`InputError` naming the line of a row of another
+    length, of a CSV syntax error or of text that is not UTF-8."""
+    line = 1
+    try:
+        for row in reader:
+            line = reader.line_num
+            if not row or all(not cell.strip() for cell in row):
+                continue
+            if len(row) != n_fields:
+                raise InputError(f"{path}: line {line}: expected {n_fields} fields, got "
+                                 f"{len(row)}")
+            yield line, row
+    except csv.Error as exc:
+        raise InputError(f"{path}: line {line}: {exc}") from None
+    except UnicodeDecodeError:
+        raise InputError(f"{path}: line {line + 1}: not UTF-8 text") from None
+
+
 def format_time(time_ns: int) -> str:
     """Integer ns -> exact decimal seconds with 9 digits (``-0.000000001``)."""
     sign = "-" if time_ns < 0 else ""
@@ -242,41 +262,29 @@ def read_detections_csv(path, rig: Rig, camera: str | None = None,
                    if missing == ["camera"] and not unknown else ""))
         col = {name: header.index(name) for name in header}
         has_frame, has_score = "frame" in col, "score" in col
-        line = 1
-        try:
-            for row in reader:
-                line = reader.line_num
-                if not row or all(not cell.strip() for cell in row):
-                    continue
-                if len(row) != len(header):
-                    raise InputError(f"{path}: line {line}: expected {len(header)} fields, "
-                                     f"got {len(row)}")
-                name = row[col["camera"]].strip() if "camera" in col else str(camera)
-                if camera is not None and name != camera:
-                    raise InputError(f"{path}: line {line}: camera {name!r}, but the file "
-                                     f"was given as camera {camera}'s (--detections "
-                                     f"{camera}={path}): every row of a camera's own CSV "
-                                     f"names that camera, or the column is left out")
-                if name not in index:
-                    raise InputError(f"{path}: line {line}: unknown camera {name!r} "
-                                     f"(rig has {', '.join(rig.names)})")
-                cams.append(index[name])
-                lines.append(line)
-                times.append(_cell(row, col, "time", path, line))
-                # u and v both empty: a frame without a candidate (the ball missed)
-                miss = not row[col["u"]].strip() and not row[col["v"]].strip()
-                missed.append(miss)
-                uv.append((np.nan, np.nan) if miss else (_cell(row, col, "u", path, line),
-                                                         _cell(row, col, "v", path, line)))
-                if has_frame:
-                    frames.append(_cell(row, col, "frame", path, line))
-                if has_score:
-                    scores.append(np.nan if miss and not row[col["score"]].strip()
-                                  else _cell(row, col, "score", path, line))
-        except csv.Error as exc:
-            raise InputError(f"{path}: line {line}: {exc}") from None
-        except UnicodeDecodeError:
-            raise InputError(f"{path}: line {line + 1}: not UTF-8 text") from None
+        for line, row in csv_rows(reader, len(header), path):
+            name = row[col["camera"]].strip() if "camera" in col else str(camera)
+            if camera is not None and name != camera:
+                raise InputError(f"{path}: line {line}: camera {name!r}, but the file "
+                                 f"was given as camera {camera}'s (--detections "
+                                 f"{camera}={path}): every row of a camera's own CSV "
+                                 f"names that camera, or the column is left out")
+            if name not in index:
+                raise InputError(f"{path}: line {line}: unknown camera {name!r} "
+                                 f"(rig has {', '.join(rig.names)})")
+            cams.append(index[name])
+            lines.append(line)
+            times.append(_cell(row, col, "time", path, line))
+            # u and v both empty: a frame without a candidate (the ball missed)
+            miss = not row[col["u"]].strip() and not row[col["v"]].strip()
+            missed.append(miss)
+            uv.append((np.nan, np.nan) if miss else (_cell(row, col, "u", path, line),
+                                                     _cell(row, col, "v", path, line)))
+            if has_frame:
+                frames.append(_cell(row, col, "frame", path, line))
+            if has_score:
+                scores.append(np.nan if miss and not row[col["score"]].strip()
+                              else _cell(row, col, "score", path, line))
     return _detections_from_rows(rig, np.asarray(cams, np.int32), np.asarray(times, np.int64),
                                  np.asarray(uv, np.float64).reshape(-1, 2),
                                  np.asarray(frames, np.int64) if has_frame else None,
