@@ -1697,6 +1697,11 @@ WHOLE_MAX_BYTES = 1 << 30
 #: candidate that two other cameras support (taken in arrays), one candidate otherwise,
 #: several candidates
 _PYTHON_S = (1.1e-6, 12e-6, 150e-6)
+#: the Python path's cost per candidate and candidate pair of its crowdest frames, s
+#: (:func:`_decide_compiled`: candidates × k_max², k_max the most candidates a frame holds;
+#: hostile40, 720 frames of a rally: 10, 20, 50 candidates a frame 0.53, 2.0, 30 CPU s and
+#: 78 MB, 286 MB, 3.3 GB; the compiled kernels 0.3-1.3 s)
+_PYTHON_PAIR_S = 3.4e-7
 #: frames :func:`_decide_compiled` looks at, at most (evenly spaced: a share's estimate)
 _WHOLE_SAMPLE = 20_000
 
@@ -1715,7 +1720,11 @@ def _decide_compiled(c: _Candidates, starts: np.ndarray, ends: np.ndarray, table
     rig), ~150 µs one of several (a static object, blobs) (:data:`_PYTHON_S`). So the
     compiled kernels wherever at least :data:`WHOLE_FROM_SHARE` of the frames are not of the
     first kind (judged by the frames' times alone: one candidate, and a frame of two other
-    cameras within the gate's gap; on up to :data:`_WHOLE_SAMPLE` evenly spaced frames), and
+    cameras within the gate's gap; on up to :data:`_WHOLE_SAMPLE` evenly spaced frames), or
+    where crowded frames would cost the Python path :data:`WHOLE_LOAD_S` or more (its
+    support pairs each candidate with every pair of another camera's frames around it:
+    :data:`_PYTHON_PAIR_S` a candidate and pair of the crowdest frame's candidates; 50
+    candidates a frame took 30 s and 3.3 GB there, 209 in one camera asked for 16 GiB), and
     the state holding every frame stays below :data:`WHOLE_MAX_BYTES`. Imports nothing (the
     caller loads the kernels only where they are worth it)."""
     n_frames = len(starts)
@@ -1739,14 +1748,17 @@ def _decide_compiled(c: _Candidates, starts: np.ndarray, ends: np.ndarray, table
             near += (gap <= max_gap_ns) & (camera != b)
         simple = ~several & (near >= 2)
     shares = np.array([np.mean(simple), np.mean(~simple & ~several), np.mean(several)])
-    python_s = float(n_frames * (shares @ np.array(_PYTHON_S)))
-    if WHOLE_COMPILED is not None:
-        return WHOLE_COMPILED, python_s
     h_max = max(len(times) for times, _ in tables)
     k_max = max(table.shape[1] for _, table in tables)
+    # the numpy support pairs every candidate with each pair of another camera's frames
+    # around it, k_max² candidate pairs: sessions of crowded frames cost that far more
+    crowd_s = len(c.camera) * k_max**2 * _PYTHON_PAIR_S if k_max >= 2 else 0.0
+    python_s = float(n_frames * (shares @ np.array(_PYTHON_S))) + crowd_s
+    if WHOLE_COMPILED is not None:
+        return WHOLE_COMPILED, python_s
     if len(tables) * h_max * k_max * (9 * 8 + 8 + 8 + 1) > WHOLE_MAX_BYTES:
         return False, python_s
-    return bool(shares[1] + shares[2] >= WHOLE_FROM_SHARE), python_s
+    return bool(shares[1] + shares[2] >= WHOLE_FROM_SHARE or crowd_s >= WHOLE_LOAD_S), python_s
 
 
 def _sums_reproduced() -> bool:
