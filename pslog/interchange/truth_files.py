@@ -41,6 +41,15 @@ TIME_COLUMNS = ("t", "time", "timestamp")
 #: times further than the tracks', is taken for millimetres and refused (as ``pslog rig
 #: import`` refuses cameras beyond 100 m without ``--units``)
 MILLIMETRE_LIMIT_M = 100.0
+#: a truth coordinate beyond this many metres from the world origin is refused, naming its
+#: line: no rig's world (1e308 was read, and the error sums overflowed with a numpy warning)
+MAX_POSITION_M = 1e6
+#: a truth whose samples lie a median this many times the tracks' point steps apart, over a
+#: span this many times theirs, holds times in another unit than seconds (milliseconds:
+#: 1000) and is refused (as ``pslog import`` refuses detections so far apart,
+#: :data:`pslog.log.csvio._UNIT_RATIO`); a truth that is merely sparse (a ball at rest
+#: measured twice) spans the tracks' time, not hundreds of times it
+UNIT_RATIO = 300.0
 
 
 @dataclass(frozen=True)
@@ -133,12 +142,14 @@ def _number(text: str, what: str, path: Path, line: int) -> float:
         value = float(text)
     except ValueError:
         value = None
-    if value is None or not np.isfinite(value):
+    if value is None or not np.isfinite(value) or abs(value) > MAX_POSITION_M:
         reason = ("empty" if not text.strip() else
-                  "not a number" if value is None else "not a finite number")
-        raise InputError(f"{path}: line {line}: {what} {text!r}: {reason} (every truth "
-                         f"sample needs a position in metres: leave out the rows of times "
-                         f"without one)")
+                  "not a number" if value is None else "not a finite number"
+                  if not np.isfinite(value) else
+                  f"beyond any rig's world (at most {MAX_POSITION_M:g} m from the origin)")
+        raise InputError(f"{path}: line {line}: {what} {text!r}: {reason}"
+                         + (" (every truth sample needs a position in metres: leave out the "
+                            "rows of times without one)" if "world" not in reason else ""))
     return value
 
 
@@ -285,6 +296,7 @@ def truth_for_tracks(read: TruthFile, tracks: Sequence[Track], origin_ns: int = 
         raise InputError(f"{read.path}: no time in common with {whose} "
                          f"{_span(lo + shift, hi + shift)}, both on {clock}; nothing to score")
     if spans:
+        _check_seconds(read, tracks, spans)
         truth_norm = float(np.median(np.linalg.norm(read.truth.position_world, axis=1)))
         points = np.concatenate([track.position_world for track in tracks])
         points = points[np.isfinite(points).all(axis=1)]
@@ -298,6 +310,27 @@ def truth_for_tracks(read: TruthFile, tracks: Sequence[Track], origin_ns: int = 
     if not (-(2**63) <= first and last < 2**63):  # (an int64 of ns on the session clock)
         raise InputError(f"{read.path}: times beyond the session clock's range")
     return Truth(read.truth.time_ns - np.int64(shift), read.truth.position_world)
+
+
+def _check_seconds(read: TruthFile, tracks: Sequence[Track], spans) -> None:
+    """InputError if the truth's samples lie :data:`UNIT_RATIO` times the tracks' point
+    steps apart (medians) over a span that many times theirs: times in milliseconds (or
+    microseconds) read as seconds, which scored every track metres off in silence."""
+    steps = [float(np.median(np.diff(track.time_ns))) for track in tracks if len(track) >= 2]
+    t = read.truth.time_ns
+    if not steps or min(steps) <= 0:
+        return
+    step, track_step = float(np.median(np.diff(t))), min(steps)
+    span = float(t[-1] - t[0])
+    track_span = max(s[2] for s in spans) - min(s[1] for s in spans)
+    ratio = step / track_step
+    if ratio >= UNIT_RATIO and span >= UNIT_RATIO * max(track_span, track_step):
+        unit, factor = (("milliseconds", "1000") if ratio < 1000 * UNIT_RATIO
+                        else ("microseconds", "1e6"))
+        raise InputError(f"{read.path}: its samples lie a median {step / NS:.4g} s apart over "
+                         f"{span / NS:.4g} s, {ratio:.0f} times the tracks' "
+                         f"{track_step / NS * 1e3:.4g} ms over {track_span / NS:.4g} s: the "
+                         f"times look like {unit}; give seconds (divide them by {factor})")
 
 
 def describe(read: TruthFile, truth: Truth, origin_ns: int = 0) -> str:

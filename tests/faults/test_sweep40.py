@@ -79,3 +79,61 @@ def test_a_camera_of_crowded_frames_is_gated_in_bounded_memory(inputs, tmp_path,
     if command == "fuse":  # the ball still found among the blobs
         session = pslog.read_session(out)
         assert len(session.tracks["typeA"]) > 100
+
+
+def _truth_rows(inputs: Path) -> list[str]:
+    """The simulated session's own truth as CSV rows ``t,x,y,z`` (header first)."""
+    truth = pslog.read_session(inputs / "s.mcap").truth
+    return ["t,x,y,z"] + [f"{format_time(t)},{x!r},{y!r},{z!r}" for t, (x, y, z) in
+                          zip(truth.time_ns.tolist(), truth.position_world.tolist(),
+                              strict=True)]
+
+
+@pytest.mark.parametrize("where", ["one", "all"])
+def test_a_truth_position_beyond_any_world_is_refused_naming_its_line(inputs, tmp_path,
+                                                                     where):
+    """``1e308`` is a finite float: eval scored it, numpy's overflow warning on stderr (one
+    such row: exit 0 beside the table; every row: the warning, then the millimetre error,
+    three lines)."""
+    rows = _truth_rows(inputs)
+    for k in ([5] if where == "one" else range(1, len(rows))):
+        rows[k] = rows[k].rsplit(",", 1)[0] + ",1e308"
+    (tmp_path / "truth.csv").write_text("\n".join(rows) + "\n")
+    before = fingerprint(inputs, tmp_path)
+    run = run_pslog("eval", inputs / "f.mcap", "--truth", tmp_path / "truth.csv")
+    assert_one_line_error(run, 1, contains=(
+        f"truth.csv: line {6 if where == 'one' else 2}: z value '1e308': beyond any rig's "
+        f"world (at most 1e+06 m from the origin)"))
+    assert_untouched(before, inputs, tmp_path)
+
+
+@pytest.mark.parametrize("unit, factor, said", [("milliseconds", 1000, "1000"),
+                                               ("microseconds", 10**6, "1e6")])
+def test_a_truth_in_milliseconds_is_refused(inputs, tmp_path, unit, factor, said):
+    """Times in ms read as seconds: the truth's samples 11 s apart over 1489 s, and every
+    track scored 1.3 m off with exit 0 (``pslog import`` refuses detections so far apart)."""
+    rows = _truth_rows(inputs)
+    scaled = [rows[0]] + [f"{format_time(int(r.split(',')[0].replace('.', '')) * factor)},"
+                          f"{r.partition(',')[2]}" for r in rows[1:]]
+    (tmp_path / "truth.csv").write_text("\n".join(scaled) + "\n")
+    run = run_pslog("eval", inputs / "f.mcap", "--truth", tmp_path / "truth.csv")
+    assert_one_line_error(run, 1, contains=(
+        "truth.csv: its samples lie a median", f"the times look like {unit}; give seconds "
+        f"(divide them by {said})"))
+    # (a TUM file alike)
+    tum = "\n".join(r.replace(",", " ") for r in scaled[1:]) + "\n"
+    (tmp_path / "truth.tum").write_text(tum)
+    run = run_pslog("eval", inputs / "f.mcap", "--truth", tmp_path / "truth.tum")
+    assert_one_line_error(run, 1, contains=f"the times look like {unit}")
+
+
+def test_a_sparse_truth_spanning_the_tracks_is_scored(inputs, tmp_path):
+    """A truth of two samples 10 s apart (a ball at rest measured twice; the score is the
+    user's to judge), 900 times the tracks' steps, spans 7 times the tracks' time, not
+    hundreds of times it: scored (the unit check needs both)."""
+    rows = _truth_rows(inputs)
+    at = rows[1].partition(",")[2]
+    (tmp_path / "truth.csv").write_text(f"t,x,y,z\n0,{at}\n10,{at}\n")
+    run = run_pslog("eval", inputs / "f.mcap", "--truth", tmp_path / "truth.csv")
+    assert run.code == 0, run.stderr
+    assert "2 samples" in run.stdout and "typeA" in run.stdout, run.stdout
