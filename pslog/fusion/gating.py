@@ -1614,6 +1614,7 @@ def gate(detections: Detections, rig: Rig, *, causal: bool = True, wait_s: float
 
     options = options or GatingOptions()
     max_gap_ns = round((max_gap_s or default_max_gap_s(rig)) * NS)
+    check_crowding(detections, rig)
     c, tables = common() if common is not None else gate_common(detections, rig)
     n = len(c.camera)
     reason = np.full(n, -1, dtype=np.int8)
@@ -1621,6 +1622,34 @@ def gate(detections: Detections, rig: Rig, *, causal: bool = True, wait_s: float
         return _result(detections, rig, reason)
     _decided(c, rig, options, causal, round(wait_s * NS), max_gap_ns, reason, tables)
     return _result(detections, rig, reason, options, doubt)
+
+
+#: most candidates a frame may hold for the gate (:func:`check_crowding`): it pairs each
+#: candidate with every pair of another camera's frames around it, work that grows as the
+#: square of a frame's candidates (hostile40, a rally of 8 s, one camera's frames of 1001
+#: and 2001 candidates: 8.5 and 32.5 CPU s a pass; 20,834, 5 million in all, about an hour).
+#: Detectors keep far fewer (``pslog record`` 5 by default, ``redetect`` at most 100).
+MAX_FRAME_CANDIDATES = 1000
+
+
+def check_crowding(detections: Detections, rig: Rig) -> None:
+    """FusionError naming the first frame of the most candidates if it holds more than
+    :data:`MAX_FRAME_CANDIDATES` (an imported CSV takes any number): gating it would take
+    hours and look hung."""
+    if detections.n_candidates == 0:
+        return
+    counts = np.bincount(detections.cand_frame, minlength=detections.n_frames)
+    f = int(np.argmax(counts))
+    if counts[f] > MAX_FRAME_CANDIDATES:
+        from ..log.csvio import format_time
+
+        raise FusionError(
+            f"camera {rig.names[int(detections.frame_camera[f])]}'s frame "
+            f"{int(detections.frame_index[f])} (t = {format_time(int(detections.frame_time_ns[f]))}"
+            f" s) holds {int(counts[f])} candidates: the gate takes at most "
+            f"{MAX_FRAME_CANDIDATES} a frame (its work grows as their square: hours); keep "
+            f"each frame's best {MAX_FRAME_CANDIDATES} or fewer by score (or 'pslog fuse "
+            f"--gating off': each frame's best-scored candidate alone)")
 
 
 def gate_common(detections: Detections, rig: Rig) -> tuple:

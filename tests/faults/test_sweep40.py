@@ -34,10 +34,11 @@ def inputs(tmp_path_factory) -> Path:
     return folder
 
 
-def _crowded_csv(session: Path, out: Path, k: int, cameras: tuple[str, ...], seed: int) -> int:
-    """``session``'s detections as a detections CSV, every frame of ``cameras`` given
-    ``k - 1`` false candidates uniform over its image (blobs, a noisy detector); returns
-    the rows written."""
+def _crowded_csv(session: Path, out: Path, k: int, cameras: tuple[str, ...], seed: int,
+                 only_frame: int | None = None) -> int:
+    """``session``'s detections as a detections CSV, every frame of ``cameras`` (or only
+    its frame index ``only_frame``) given ``k - 1`` false candidates uniform over its image
+    (blobs, a noisy detector); returns the rows written."""
     s = pslog.read_session(session)
     d, rig = s.detections, s.rig
     rng = np.random.default_rng(seed)
@@ -46,7 +47,7 @@ def _crowded_csv(session: Path, out: Path, k: int, cameras: tuple[str, ...], see
         name = rig.names[d.frame_camera[f]]
         t, index = format_time(int(d.frame_time_ns[f])), int(d.frame_index[f])
         uv = d.cand_uv[d.cand_frame == f].tolist()
-        if name in cameras:
+        if name in cameras and only_frame in (None, index):
             cam = rig.cameras[d.frame_camera[f]]
             uv += rng.uniform([0, 0], [cam.width, cam.height], size=(k - 1, 2)).tolist()
         rows += [f"{name},{t},{u!r},{v!r},{index},1.0" for u, v in uv]
@@ -137,3 +138,30 @@ def test_a_sparse_truth_spanning_the_tracks_is_scored(inputs, tmp_path):
     run = run_pslog("eval", inputs / "f.mcap", "--truth", tmp_path / "truth.csv")
     assert run.code == 0, run.stderr
     assert "2 samples" in run.stdout and "typeA" in run.stdout, run.stdout
+
+
+@pytest.mark.parametrize("command", ["fuse", "sync"])
+def test_a_frame_of_more_candidates_than_the_gate_takes_is_refused(inputs, tmp_path,
+                                                                    command):
+    """A CSV takes any number of candidates a frame, and the gate's work grows as their
+    square: one camera's frames of 20,834 (5 million candidates in 8 s) ran for an hour
+    without a word. More than 1000 in any frame: one line naming it, nothing written;
+    1000 is gated."""
+    for k in (1001, 1000):
+        _crowded_csv(inputs / "s.mcap", tmp_path / f"c{k}.csv", k, ("cam2",), 63012,
+                     only_frame=7)
+        done = run_pslog("import", "--rig", "paper3", "--detections", tmp_path / f"c{k}.csv",
+                         "-o", tmp_path / f"c{k}.mcap")
+        assert done.code == 0, done.stderr
+    before = fingerprint(tmp_path)
+    run = run_pslog(command, tmp_path / "c1001.mcap", "-o", tmp_path / "out.mcap")
+    assert_one_line_error(run, 1, contains=(
+        "camera cam2's frame 7 (t = 0.244444444 s) holds 1001 candidates: the gate takes at "
+        "most 1000 a frame"))
+    assert_untouched(before, tmp_path)
+    run = run_pslog(command, tmp_path / "c1000.mcap", "-o", tmp_path / "out.mcap")
+    assert run.code == 0, run.stderr
+    if command == "fuse":  # (without the gate, each frame's best-scored candidate)
+        run = run_pslog("fuse", tmp_path / "c1001.mcap", "--gating", "off", "-o",
+                        tmp_path / "off.mcap")
+        assert run.code == 0, run.stderr

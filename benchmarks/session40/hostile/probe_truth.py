@@ -12,7 +12,7 @@ from pathlib import Path
 from harness import run_case
 
 base, scratch = Path(sys.argv[1]), Path(sys.argv[2])
-only = sys.argv[3:] 
+only = sys.argv[3:]
 TRUTH = (base / "truth.csv").read_text()
 TUM = (base / "tum" / "truth.tum").read_text()
 rows = TRUTH.splitlines()
@@ -66,33 +66,34 @@ cases = [
      ["eval", "f.mcap", "--truth", "t.csv"]),
     ("spaces_header", write("t.csv", " t , x , y , z \n" + "\n".join(rows[1:])),
      ["eval", "f.mcap", "--truth", "t.csv"]),
-    ("nan_pos", write("t.csv", "\n".join(rows[:5] + ["0.5,nan,0,1"] + rows[5:])),
+    ("nan_pos", write("t.csv", "\n".join([*rows[:5], "0.5,nan,0,1", *rows[5:]])),
      ["eval", "f.mcap", "--truth", "t.csv"]),
-    ("inf_pos", write("t.csv", "\n".join(rows[:5] + [rows[5].rsplit(",", 1)[0] + ",inf"]
-                                         + rows[6:])), ["eval", "f.mcap", "--truth", "t.csv"]),
-    ("huge_pos_one", write("t.csv", "\n".join(rows[:5] + [rows[5].rsplit(",", 1)[0] + ",1e308"]
-                                              + rows[6:])),
+    ("inf_pos", write("t.csv", "\n".join(
+        [*rows[:5], rows[5].rsplit(",", 1)[0] + ",inf", *rows[6:]])),
+     ["eval", "f.mcap", "--truth", "t.csv"]),
+    ("huge_pos_one", write("t.csv", "\n".join(
+        [*rows[:5], rows[5].rsplit(",", 1)[0] + ",1e308", *rows[6:]])),
      ["eval", "f.mcap", "--truth", "t.csv"]),
     ("huge_pos_all", write("t.csv", "\n".join([rows[0]] + [r.split(",")[0] + ",1e308,1e308,1e308"
                                                            for r in rows[1:]])),
      ["eval", "f.mcap", "--truth", "t.csv"]),
-    ("huge_pos_json", write("t.csv", "\n".join(rows[:5] + [rows[5].rsplit(",", 1)[0] + ",1e308"]
-                                               + rows[6:])),
+    ("huge_pos_json", write("t.csv", "\n".join(
+        [*rows[:5], rows[5].rsplit(",", 1)[0] + ",1e308", *rows[6:]])),
      ["eval", "f.mcap", "--truth", "t.csv", "--json"]),
     ("neg_pos", write("t.csv", "\n".join([rows[0]] + [r.split(",")[0] + ",-1,-2,-3"
                                                       for r in rows[1:]])),
      ["eval", "f.mcap", "--truth", "t.csv"]),
-    ("nan_time", write("t.csv", "\n".join(rows[:5] + ["nan,0,0,1"] + rows[5:])),
+    ("nan_time", write("t.csv", "\n".join([*rows[:5], "nan,0,0,1", *rows[5:]])),
      ["eval", "f.mcap", "--truth", "t.csv"]),
-    ("inf_time", write("t.csv", "\n".join(rows[:5] + ["-inf,0,0,1"] + rows[5:])),
+    ("inf_time", write("t.csv", "\n".join([*rows[:5], "-inf,0,0,1", *rows[5:]])),
      ["eval", "f.mcap", "--truth", "t.csv"]),
-    ("1e308_time", write("t.csv", "\n".join(rows + ["1e308,0,0,1"])),
+    ("1e308_time", write("t.csv", "\n".join([*rows, "1e308,0,0,1"])),
      ["eval", "f.mcap", "--truth", "t.csv"]),
-    ("huge_exp_time", write("t.csv", "\n".join(rows + ["1e999999999999,0,0,1"])),
+    ("huge_exp_time", write("t.csv", "\n".join([*rows, "1e999999999999,0,0,1"])),
      ["eval", "f.mcap", "--truth", "t.csv"]),
-    ("unordered", write("t.csv", "\n".join([rows[0], rows[3], rows[2]] + rows[4:])),
+    ("unordered", write("t.csv", "\n".join([rows[0], rows[3], rows[2], *rows[4:]])),
      ["eval", "f.mcap", "--truth", "t.csv"]),
-    ("duplicated", write("t.csv", "\n".join(rows[:4] + [rows[3]] + rows[4:])),
+    ("duplicated", write("t.csv", "\n".join([*rows[:4], rows[3], *rows[4:]])),
      ["eval", "f.mcap", "--truth", "t.csv"]),
     ("one_sample", write("t.csv", "\n".join(rows[:2])), ["eval", "f.mcap", "--truth", "t.csv"]),
     ("two_samples", write("t.csv", "\n".join(rows[:3])), ["eval", "f.mcap", "--truth", "t.csv"]),
@@ -102,11 +103,11 @@ cases = [
     ("time_ms", write("t.csv", "\n".join([rows[0]] + [
         f"{float(r.split(',')[0]) * 1000!r},{r.partition(',')[2]}" for r in rows[1:]])),
      ["eval", "f.mcap", "--truth", "t.csv"]),
-    ("short_row", write("t.csv", "\n".join(rows[:5] + ["0.5,1,2"] + rows[5:])),
+    ("short_row", write("t.csv", "\n".join([*rows[:5], "0.5,1,2", *rows[5:]])),
      ["eval", "f.mcap", "--truth", "t.csv"]),
-    ("empty_cell", write("t.csv", "\n".join(rows[:5] + ["0.5,1,,2"] + rows[5:])),
+    ("empty_cell", write("t.csv", "\n".join([*rows[:5], "0.5,1,,2", *rows[5:]])),
      ["eval", "f.mcap", "--truth", "t.csv"]),
-    ("units_in_cells", write("t.csv", "\n".join(rows[:5] + ["0.05s,1m,2m,1m"] + rows[5:])),
+    ("units_in_cells", write("t.csv", "\n".join([*rows[:5], "0.05s,1m,2m,1m", *rows[5:]])),
      ["eval", "f.mcap", "--truth", "t.csv"]),
     ("truncated", write("t.csv", TRUTH[: len(TRUTH) // 2 + 7]),
      ["eval", "f.mcap", "--truth", "t.csv"]),
@@ -144,7 +145,7 @@ cases = [
     ("method_one", None, ["eval", "f.mcap", "--truth", "truth.csv", "--method", "typeA"]),
     ("ok_json", None, ["eval", "f.mcap", "--truth", "truth.csv", "--json"]),
     ("ok", None, ["eval", "f.mcap", "--truth", "truth.csv"]),
-    ("underscore_time", write("t.csv", "\n".join(rows[:3] + ["0_0.5,0,0,1"])),
+    ("underscore_time", write("t.csv", "\n".join([*rows[:3], "0_0.5,0,0,1"])),
      ["eval", "f.mcap", "--truth", "t.csv"]),
     ("sub_ns_dup", write("t.csv", "t,x,y,z\n0.0000000001,0,0,1\n0.0000000002,0,0,1\n1,0,0,1\n"),
      ["eval", "f.mcap", "--truth", "t.csv"]),
