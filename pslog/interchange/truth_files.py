@@ -274,19 +274,7 @@ def truth_for_tracks(read: TruthFile, tracks: Sequence[Track], origin_ns: int = 
                  else "the session clock")
         other = origin_ns if shift else -origin_ns  # (the times read on the other clock)
         if origin_ns and not any(met) and any(meets(first + other, last + other)):
-            if shift:
-                raise InputError(
-                    f"{read.path}: its times ({_span(int(t[0]), int(t[-1]))}) are on the "
-                    f"session clock, but a CSV truth's are on the original clock, as 'pslog "
-                    f"export --csv' writes them: add the session's clock origin "
-                    f"{format_time(origin_ns)} s to every time (or give the truth as a TUM "
-                    f"file, on the session clock)")
-            raise InputError(
-                f"{read.path}: its times ({_span(int(t[0]), int(t[-1]))}) are on the "
-                f"original clock, but a TUM truth's are on the session clock, as 'pslog "
-                f"export --tum' writes them: subtract the session's clock origin "
-                f"{format_time(origin_ns)} s from every time (or give the truth as a CSV "
-                f"t,x,y,z, on the original clock)")
+            raise _other_clock(read, origin_ns)
         if any(met):  # (one track outside the truth's span, the others not)
             method, lo, hi = next(s for s, m in zip(spans, met, strict=True) if not m)
             whose = f"track {method}: the truth spans {_span(int(t[0]), int(t[-1]))}, the track"
@@ -305,11 +293,64 @@ def truth_for_tracks(read: TruthFile, tracks: Sequence[Track], origin_ns: int = 
             raise InputError(f"{read.path}: its positions lie a median {truth_norm:.4g} m from "
                              f"the world origin, the tracks' {track_norm:.3g} m: they look "
                              f"like millimetres; give metres (divide x, y, z by 1000)")
+        if origin_ns:
+            _check_clock(read, tracks, origin_ns)
     if not shift:
         return read.truth
     if not (-(2**63) <= first and last < 2**63):  # (an int64 of ns on the session clock)
         raise InputError(f"{read.path}: times beyond the session clock's range")
     return Truth(read.truth.time_ns - np.int64(shift), read.truth.position_world)
+
+
+def _other_clock(read: TruthFile, origin_ns: int) -> InputError:
+    """The error of a truth whose times are on the other clock than its format's."""
+    from ..log.csvio import format_time
+
+    t = read.truth.time_ns
+    if read.clock == "original":
+        return InputError(
+            f"{read.path}: its times ({_span(int(t[0]), int(t[-1]))}) are on the "
+            f"session clock, but a CSV truth's are on the original clock, as 'pslog "
+            f"export --csv' writes them: add the session's clock origin "
+            f"{format_time(origin_ns)} s to every time (or give the truth as a TUM "
+            f"file, on the session clock)")
+    return InputError(
+        f"{read.path}: its times ({_span(int(t[0]), int(t[-1]))}) are on the "
+        f"original clock, but a TUM truth's are on the session clock, as 'pslog "
+        f"export --tum' writes them: subtract the session's clock origin "
+        f"{format_time(origin_ns)} s from every time (or give the truth as a CSV "
+        f"t,x,y,z, on the original clock)")
+
+
+#: a truth that fits the tracks this many times better (median distance) read on the other
+#: clock than its format's is refused as on that clock (:func:`_check_clock`)
+OTHER_CLOCK_RATIO = 10.0
+
+
+def _median_distance(truth: Truth, tracks: Sequence[Track]) -> tuple[float, int]:
+    """Median distance (m) of the tracks' points from ``truth`` where it spans them, and
+    their count."""
+    d = [np.linalg.norm(truth.at(track.time_ns) - track.position_world, axis=1)
+         for track in tracks if len(track)]
+    every = np.concatenate(d) if d else np.zeros(0)
+    every = every[np.isfinite(every)]
+    return (float(np.median(every)) if len(every) else np.inf), len(every)
+
+
+def _check_clock(read: TruthFile, tracks: Sequence[Track], origin_ns: int) -> None:
+    """InputError if the truth, overlapping the tracks on its format's clock, fits them
+    :data:`OTHER_CLOCK_RATIO` times better on the other one (over at least half as many
+    points): the clocks of a session with a small origin (a first frame at -0.4 ms: -1 s)
+    overlap, and a truth on the wrong one scored every track a metre off in silence."""
+    t, position = read.truth.time_ns, read.truth.position_world
+    shift = origin_ns if read.clock == "original" else 0
+    other = 0 if read.clock == "original" else origin_ns
+    if not all(-(2**63) <= int(t[0]) - s and int(t[-1]) - s < 2**63 for s in (shift, other)):
+        return  # (times beyond the session clock's range on one clock: not that one)
+    given, n_given = _median_distance(Truth(t - np.int64(shift), position), tracks)
+    moved, n_moved = _median_distance(Truth(t - np.int64(other), position), tracks)
+    if n_moved >= max(3, n_given / 2) and OTHER_CLOCK_RATIO * moved < given:
+        raise _other_clock(read, origin_ns)
 
 
 def _check_seconds(read: TruthFile, tracks: Sequence[Track], spans) -> None:

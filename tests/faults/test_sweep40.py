@@ -11,6 +11,7 @@ and such sessions are decided by the compiled kernels (4 s and 260 MB; 2.5 s and
 
 from __future__ import annotations
 
+import json
 import resource
 from pathlib import Path
 
@@ -19,6 +20,7 @@ import pytest
 
 import pslog
 from pslog.log.csvio import format_time
+from pslog.records import NS
 
 from .promises import assert_one_line_error, assert_untouched, fingerprint, run_pslog
 
@@ -165,3 +167,48 @@ def test_a_frame_of_more_candidates_than_the_gate_takes_is_refused(inputs, tmp_p
         run = run_pslog("fuse", tmp_path / "c1001.mcap", "--gating", "off", "-o",
                         tmp_path / "off.mcap")
         assert run.code == 0, run.stderr
+
+
+def test_a_truth_on_the_other_clock_of_a_session_with_a_small_origin_is_refused(inputs,
+                                                                                tmp_path):
+    """A CSV whose first frame is at -0.5 s imports with a clock origin of -1 s: the two
+    clocks overlap, so a truth on the wrong one shared time with the tracks and scored every
+    one 1.8 m off with exit 0 (only truths sharing no time were refused as on the other
+    clock). Now a truth that fits the tracks ten times better on the other clock is."""
+    done = run_pslog("export", inputs / "s.mcap", "--detections", tmp_path / "det.csv")
+    assert done.code == 0, done.stderr
+    lines = (tmp_path / "det.csv").read_text().splitlines()
+    shifted = [lines[0]]
+    for row in lines[1:]:
+        camera, t, rest = row.split(",", 2)
+        shifted.append(f"{camera},{format_time(int(t.replace('.', '')) - NS // 2)},{rest}")
+    (tmp_path / "det.csv").write_text("\n".join(shifted) + "\n")
+    done = run_pslog("import", "--rig", "paper3", "--detections", tmp_path / "det.csv", "-o",
+                     tmp_path / "i.mcap")
+    assert done.code == 0 and "origin -1.000000000 s" in done.stdout, done.stdout
+    done = run_pslog("fuse", tmp_path / "i.mcap", "-o", tmp_path / "f.mcap")
+    assert done.code == 0, done.stderr
+    rows = _truth_rows(inputs)
+
+    def moved(by_ns: int, sep: str = ",") -> str:
+        return "\n".join(f"{format_time(int(r.split(',')[0].replace('.', '')) + by_ns)}"
+                         f"{sep}{r.partition(',')[2].replace(',', sep)}" for r in rows[1:])
+
+    files = {"original.csv": "t,x,y,z\n" + moved(-NS // 2), "session.tum": moved(NS // 2, " "),
+             "session.csv": "t,x,y,z\n" + moved(NS // 2), "original.tum": moved(-NS // 2, " ")}
+    for name, text in files.items():
+        (tmp_path / name).write_text(text + "\n")
+    for good in ("original.csv", "session.tum"):
+        run = run_pslog("eval", tmp_path / "f.mcap", "--truth", tmp_path / good, "--json")
+        assert run.code == 0, run.stderr
+        assert all(row["mean_mm"] < 50 for row in json.loads(run.stdout)), run.stdout
+    run = run_pslog("eval", tmp_path / "f.mcap", "--truth", tmp_path / "session.csv")
+    assert_one_line_error(run, 1, contains=(
+        "session.csv: its times (0.500000000-1.988888889 s) are on the session clock, but a "
+        "CSV truth's are on the original clock", "add the session's clock origin "
+        "-1.000000000 s to every time"))
+    run = run_pslog("eval", tmp_path / "f.mcap", "--truth", tmp_path / "original.tum")
+    assert_one_line_error(run, 1, contains=(
+        "original.tum: its times (-0.500000000-0.988888889 s) are on the original clock, but "
+        "a TUM truth's are on the session clock", "subtract the session's clock origin "
+        "-1.000000000 s"))
