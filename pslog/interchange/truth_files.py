@@ -1,7 +1,8 @@
 """A ground truth of one's own (motion capture, a measured trajectory) read for ``pslog eval
 --truth FILE``: a CSV ``t,x,y,z`` or a TUM trajectory, the formats ``pslog export`` writes.
 
-- CSV: a header naming the time column ``t`` (or ``time``, ``timestamp``) and ``x, y, z``;
+- CSV: a header naming the time column ``t`` (or ``time``, ``timestamp``) and ``x, y, z``
+  (separated by commas, or by tabs throughout);
   other columns are ignored (``pslog export --csv``'s ``camera`` and quality columns), but a
   ``method`` column must hold one method (a tracks CSV of one method, the truth of another
   rig). Times in seconds **on the original clock**: the clock of the CSV ``pslog import``
@@ -166,7 +167,11 @@ def _seconds(text: str, path: Path, line: int) -> int:
 
 
 def _read_csv(text: str, path: Path) -> tuple[np.ndarray, np.ndarray, list[int]]:
-    reader = csv.reader(io.StringIO(text, newline=""))
+    # (tab-separated, a .tsv or a spreadsheet's "text, tab delimited": a header of tabs and
+    # no comma)
+    head = text.lstrip("\r\n").partition("\n")[0]
+    tabs = "\t" in head and "," not in head
+    reader = csv.reader(io.StringIO(text, newline=""), delimiter="\t" if tabs else ",")
     try:
         header = [h.strip() for h in next(reader)]
     except csv.Error as exc:
@@ -182,7 +187,7 @@ def _read_csv(text: str, path: Path) -> tuple[np.ndarray, np.ndarray, list[int]]
         shown = shown if len(shown) <= 200 else shown[:200] + "..."
         raise InputError(f"{path}: line 1: bad header {shown!r}: expected columns t,x,y,z "
                          f"(time in seconds, or named time or timestamp; x, y, z in metres; "
-                         f"other columns ignored)")
+                         f"other columns ignored)" + _separator_hint(header))
     cols = [lower.index(name) for name in "xyz"]
     method_col = lower.index("method") if "method" in lower else None
     times: list[int] = []
@@ -211,6 +216,15 @@ def _read_csv(text: str, path: Path) -> tuple[np.ndarray, np.ndarray, list[int]]
                          f"({', '.join(methods)}): keep one method's rows as the truth")
     return (np.asarray(times, np.int64), np.asarray(positions, np.float64).reshape(-1, 3),
             lines)
+
+
+def _separator_hint(header: list[str]) -> str:
+    """A note for a header of one field holding semicolons (a spreadsheet's CSV where the
+    decimal mark is a comma)."""
+    if len(header) == 1 and ";" in header[0]:
+        return ("; its fields are separated by ';': separate them by commas (or tabs), with "
+                "decimal points")
+    return ""
 
 
 def _read_tum(text: str, path: Path) -> tuple[np.ndarray, np.ndarray, list[int]]:

@@ -19,6 +19,8 @@ Detections CSV (import and export use exactly this format)::
   (``cam1,0.011111111,,,1,``): a frame, no candidate.
 - One CSV per camera (:func:`read_camera_csvs`, ``pslog import --detections NAME=FILE``):
   the same rows without the ``camera`` column (or with it, naming that camera in every row).
+- Fields separated by commas, or by tabs throughout (a first line of tabs and no comma: a
+  .tsv, a spreadsheet's "text, tab delimited").
 
 Export writes all six columns, times as exact decimals with 9 digits and pixels with
 ``repr`` precision, and a row for every frame without a candidate, so export -> import
@@ -195,7 +197,7 @@ def read_detections_csv(path, rig: Rig, camera: str | None = None) -> Detections
     index = {name: i for i, name in enumerate(rig.names)}
     cams, times, frames, uv, scores, lines, missed = [], [], [], [], [], [], []
     with handle:
-        reader = csv.reader(handle)
+        reader = csv.reader(handle, delimiter="\t" if _tab_separated(path) else ",")
         try:
             header = next(reader, None)
         except UnicodeDecodeError as exc:  # (not the codec's own words)
@@ -232,7 +234,9 @@ def read_detections_csv(path, rig: Rig, camera: str | None = None) -> Detections
                 + (f" (unknown: {', '.join(unknown)})" if unknown else "")
                 + (f" (missing: {', '.join(missing)})" if missing else "")
                 + ("; one camera's file: name its camera, --detections CAMERA=FILE"
-                   if missing == ["camera"] and not unknown else ""))
+                   if missing == ["camera"] and not unknown else "")
+                + ("; its fields are separated by ';': separate them by commas (or tabs), "
+                   "with decimal points" if len(header) == 1 and ";" in header[0] else ""))
         col = {name: header.index(name) for name in header}
         has_frame, has_score = "frame" in col, "score" in col
         line = 1
@@ -275,6 +279,17 @@ def read_detections_csv(path, rig: Rig, camera: str | None = None) -> Detections
                                  np.asarray(frames, np.int64) if has_frame else None,
                                  np.asarray(scores, np.float64) if has_score else None, path,
                                  np.asarray(lines, np.int64), np.asarray(missed, bool))
+
+
+def _tab_separated(path: Path) -> bool:
+    """Whether the file's first line holds tabs and no comma: a tab-separated file (a .tsv,
+    a spreadsheet's "text, tab delimited"), read as such."""
+    try:
+        with open(path, "rb") as raw:
+            head = raw.readline(1 << 16).lstrip(b"\r\n")
+    except OSError:
+        return False  # (the open below says why)
+    return b"\t" in head and b"," not in head
 
 
 def read_camera_csvs(files, rig: Rig) -> Detections:

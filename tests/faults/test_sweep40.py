@@ -212,3 +212,51 @@ def test_a_truth_on_the_other_clock_of_a_session_with_a_small_origin_is_refused(
         "original.tum: its times (-0.500000000-0.988888889 s) are on the original clock, but "
         "a TUM truth's are on the session clock", "subtract the session's clock origin "
         "-1.000000000 s"))
+
+
+def test_tab_separated_truths_and_detections_are_read(inputs, tmp_path):
+    """A .tsv truth (the reader routes .tsv to its CSV form) and a tab-separated camera file
+    (a spreadsheet's "text, tab delimited") were refused as a bad header 't\\tx\\ty\\tz'."""
+    rows = _truth_rows(inputs)
+    (tmp_path / "truth.csv").write_text("\n".join(rows) + "\n")
+    (tmp_path / "truth.tsv").write_text("\n".join(r.replace(",", "\t") for r in rows) + "\n")
+    scores = []
+    for name in ("truth.csv", "truth.tsv"):
+        run = run_pslog("eval", inputs / "f.mcap", "--truth", tmp_path / name, "--json")
+        assert run.code == 0, run.stderr
+        scores.append([(r["method"], r["mean_mm"], r["n_points"]) for r in json.loads(run.stdout)])
+    assert scores[0] == scores[1] and len(scores[0]) == 4
+    done = run_pslog("export", inputs / "s.mcap", "--detections", tmp_path / "det.csv")
+    assert done.code == 0, done.stderr
+    lines = (tmp_path / "det.csv").read_text().splitlines()
+    sessions = []
+    for sep in (",", "\t"):
+        args = []
+        for camera in ("cam1", "cam2", "cam3"):
+            own = [r.partition(",")[2] for r in lines[1:] if r.startswith(camera + ",")]
+            path = tmp_path / f"{camera}{'tsv' if sep == chr(9) else ''}.csv"
+            path.write_text("\n".join(r.replace(",", sep)
+                                      for r in [lines[0].partition(",")[2], *own]) + "\n")
+            args += ["--detections", f"{camera}={path}"]
+        out = tmp_path / f"i{len(sessions)}.mcap"
+        done = run_pslog("import", "--rig", "paper3", *args, "-o", out)
+        assert done.code == 0, done.stderr
+        d = pslog.read_session(out).detections
+        sessions.append((d.frame_time_ns.tolist(), d.frame_camera.tolist(),
+                         d.cand_uv.tolist(), d.cand_score.tolist()))
+    assert sessions[0] == sessions[1] and len(sessions[0][0]) == 135
+
+
+def test_semicolon_separated_files_are_told_to_use_commas(inputs, tmp_path):
+    """A spreadsheet's CSV where the decimal mark is a comma: 't;x;y;z' named a bad header,
+    not why."""
+    (tmp_path / "truth.csv").write_text("t;x;y;z\n0;0,3;0,5;1\n1;0,3;0,5;1\n")
+    run = run_pslog("eval", inputs / "f.mcap", "--truth", tmp_path / "truth.csv")
+    assert_one_line_error(run, 1, contains="bad header 't;x;y;z': expected columns t,x,y,z")
+    assert run.stderr.rstrip().endswith("its fields are separated by ';': separate them by "
+                                        "commas (or tabs), with decimal points")
+    (tmp_path / "cam1.csv").write_text("time;u;v\n0;1,5;2,5\n")
+    run = run_pslog("import", "--rig", "paper3", "--detections", f"cam1={tmp_path / 'cam1.csv'}",
+                    "-o", tmp_path / "o.mcap")
+    assert_one_line_error(run, 1, contains="its fields are separated by ';'")
+    assert not (tmp_path / "o.mcap").exists()
