@@ -136,6 +136,12 @@ def _named_files(values: list[str], rig) -> dict[str, str] | int:
                                          f"give CAMERA=FILE, the rig's name for the camera")
         if not path.strip():
             return usage_error("import", f"argument --detections {value}: empty file name")
+        if not os.path.lexists(path) and os.path.lexists(value):
+            # (a file of every camera's rows named cam1=...: 'no such file: x.csv' said not
+            # which file was meant)
+            return usage_error("import", f"argument --detections {value}: read as camera "
+                                         f"{name}'s file {path}, which does not exist; for the "
+                                         f"file {value} itself give ./{value}")
         if name in named:
             return usage_error("import", f"argument --detections: camera {name} given twice "
                                          f"({named[name]}, {path})")

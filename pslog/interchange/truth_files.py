@@ -210,7 +210,7 @@ def _read_csv(text: str, path: Path) -> tuple[np.ndarray, np.ndarray, list[int]]
                                    for c in cols))
             lines.append(line)
     except csv.Error as exc:
-        raise InputError(f"{path}: line {line}: {exc}") from None
+        raise InputError(f"{path}: line {reader.line_num}: {exc}") from None
     if len(methods) > 1:
         raise InputError(f"{path} holds the tracks of {len(methods)} methods "
                          f"({', '.join(methods)}): keep one method's rows as the truth")

@@ -271,7 +271,7 @@ def read_detections_csv(path, rig: Rig, camera: str | None = None) -> Detections
                     scores.append(np.nan if miss and not row[col["score"]].strip()
                                   else _cell(row, col, "score", path, line))
         except csv.Error as exc:
-            raise InputError(f"{path}: line {line}: {exc}") from None
+            raise InputError(f"{path}: line {reader.line_num}: {exc}") from None
         except UnicodeDecodeError:
             raise InputError(f"{path}: line {line + 1}: not UTF-8 text") from None
     return _detections_from_rows(rig, np.asarray(cams, np.int32), np.asarray(times, np.int64),

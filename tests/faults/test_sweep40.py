@@ -260,3 +260,35 @@ def test_semicolon_separated_files_are_told_to_use_commas(inputs, tmp_path):
                     "-o", tmp_path / "o.mcap")
     assert_one_line_error(run, 1, contains="its fields are separated by ';'")
     assert not (tmp_path / "o.mcap").exists()
+
+
+def test_a_joined_csv_named_like_camera_equals_file_is_told_how_to_give_it(inputs, tmp_path):
+    """A file of every camera's rows named ``cam1=match.csv``, given alone: read as camera
+    cam1's file ``match.csv``, the error was 'no such file: match.csv' (exit 1), not which
+    file was meant."""
+    done = run_pslog("export", inputs / "s.mcap", "--detections", tmp_path / "cam1=match.csv")
+    assert done.code == 0, done.stderr
+    before = fingerprint(tmp_path)
+    run = run_pslog("import", "--rig", "paper3", "--detections", "cam1=match.csv", "-o",
+                    "o.mcap", cwd=tmp_path)
+    assert_one_line_error(run, 2, contains=(
+        "argument --detections cam1=match.csv: read as camera cam1's file match.csv, which "
+        "does not exist; for the file cam1=match.csv itself give ./cam1=match.csv"))
+    assert_untouched(before, tmp_path)
+    run = run_pslog("import", "--rig", "paper3", "--detections", "./cam1=match.csv", "-o",
+                    "o.mcap", cwd=tmp_path)
+    assert run.code == 0 and "135 detections" in run.stdout, run.stderr
+
+
+@pytest.mark.parametrize("command", ["eval", "import"])
+def test_an_oversized_field_names_its_own_line(inputs, tmp_path, command):
+    """The csv module's errors named the line before (the last row read whole): a field of
+    200,000 digits on line 3 was said to be on line 2."""
+    rows = (["t,x,y,z", "0,0,0,1", "1" * 200_000 + ",0,0,1"] if command == "eval"
+            else ["time,u,v", "0,1,2", "1" * 200_000 + ",3,4"])
+    (tmp_path / "f.csv").write_text("\n".join(rows) + "\n")
+    args = (["eval", inputs / "f.mcap", "--truth", tmp_path / "f.csv"] if command == "eval"
+            else ["import", "--rig", "paper3", "--detections", f"cam1={tmp_path / 'f.csv'}",
+                  "-o", tmp_path / "o.mcap"])
+    assert_one_line_error(run_pslog(*args), 1,
+                          contains="f.csv: line 3: field larger than field limit")
