@@ -512,41 +512,22 @@ def _support(c: _Candidates, rig: Rig, F: np.ndarray, tables, options: GatingOpt
                 ok &= np.abs(t - times[np.maximum(second, 0)]) <= max_gap_ns
                 if extrapolate:  # only where no interpolation was possible
                     ok &= inext < 0
-                idx = np.flatnonzero(ok)
-                if len(idx) == 0:
-                    continue
-                near[idx] = True
-                r0 = table[first[idx]]  # (k, K)
-                r1 = table[second[idx]]
-                valid = (r0[:, :, None] >= 0) & (r1[:, None, :] >= 0)
-                y0 = c.uv_und[np.maximum(r0, 0)][:, :, None, :]
-                y1 = c.uv_und[np.maximum(r1, 0)][:, None, :, :]
-                t0 = c.time_ns[np.maximum(r0, 0)][:, :, None]
-                t1 = c.time_ns[np.maximum(r1, 0)][:, None, :]
-                span = (t1 - t0) / NS
-                tt = t[idx][:, None, None]
-                with np.errstate(invalid="ignore", divide="ignore"):
-                    w = np.where(span != 0, (tt - t0) / NS / np.where(span != 0, span, 1), 0.0)
-                    y = y0 + w[..., None] * (y1 - y0)
-                    speed = np.linalg.norm(y1 - y0, axis=-1) / np.abs(span)
-                valid &= (span > 0) & (speed <= vmax)
-                tau = options.epipolar_px + 0.5 * accel * np.abs(tt - t0) / NS * np.abs(
-                    tt - t1) / NS
-                ln = lines[idx][:, None, None, :]
-                d = np.abs(ln[..., 0] * y[..., 0] + ln[..., 1] * y[..., 1] + ln[..., 2])
-                r = np.where(valid & np.isfinite(d), d / tau, np.inf).reshape(len(idx), -1)
-                k = np.argmin(r, axis=1)
-                rk = r[np.arange(len(idx)), k]
-                better = rk < best[idx]
-                best[idx[better]] = rk[better]
-                best_uv[idx[better]] = y.reshape(len(idx), -1, 2)[np.arange(len(idx)), k][better]
+                near[ok] = True
+                # (in blocks of candidates: each holds K² pairs, K the most candidates a
+                # frame has, which a crowded session makes many: 50 a frame held GBs)
+                every = np.flatnonzero(ok)
+                block = max(1, _SUPPORT_PAIRS // max(1, table.shape[1] ** 2))
+                for idx in (every[k:k + block] for k in range(0, len(every), block)):
+                    _support_pairs(idx, first, second, table, t, c, lines, best, best_uv,
+                                   vmax, accel, options)
             # a single nearby frame (the other camera missed the one before): its candidates
             # as they are, allowing the image motion a ball can make since
             single = ~near & (i1 >= 0)
             single &= np.abs(t - times[np.maximum(i1, 0)]) <= max_gap_ns
-            idx = np.flatnonzero(single)
-            if len(idx):
-                near[idx] = True
+            every = np.flatnonzero(single)
+            near[every] = True
+            block = max(1, _SUPPORT_PAIRS // max(1, table.shape[1]))
+            for idx in (every[k:k + block] for k in range(0, len(every), block)):
                 r1 = table[i1[idx]]
                 y = c.uv_und[np.maximum(r1, 0)]
                 dt = np.abs(t[idx][:, None] - c.time_ns[np.maximum(r1, 0)]) / NS
@@ -560,6 +541,41 @@ def _support(c: _Candidates, rig: Rig, F: np.ndarray, tables, options: GatingOpt
             ratio[rows[near], b] = best[near]
             carried[rows, b] = best_uv
     return ratio, carried, used
+
+
+#: candidate pairs :func:`_support`'s numpy form holds at once (a block of candidates, each
+#: with K² pairs of another camera's two frames; ~100 bytes a pair)
+_SUPPORT_PAIRS = 1 << 20
+
+
+def _support_pairs(idx, first, second, table, t, c: _Candidates, lines, best, best_uv, vmax,
+                   accel, options: GatingOptions) -> None:
+    """:func:`_support`'s interpolation (or extrapolation) between camera b's frames
+    ``first[idx]`` and ``second[idx]`` for the candidates ``idx`` of camera a: lowers
+    ``best[idx]`` to each one's best ratio, ``best_uv[idx]`` to that pair's carried pixel."""
+    r0 = table[first[idx]]  # (k, K)
+    r1 = table[second[idx]]
+    valid = (r0[:, :, None] >= 0) & (r1[:, None, :] >= 0)
+    y0 = c.uv_und[np.maximum(r0, 0)][:, :, None, :]
+    y1 = c.uv_und[np.maximum(r1, 0)][:, None, :, :]
+    t0 = c.time_ns[np.maximum(r0, 0)][:, :, None]
+    t1 = c.time_ns[np.maximum(r1, 0)][:, None, :]
+    span = (t1 - t0) / NS
+    tt = t[idx][:, None, None]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        w = np.where(span != 0, (tt - t0) / NS / np.where(span != 0, span, 1), 0.0)
+        y = y0 + w[..., None] * (y1 - y0)
+        speed = np.linalg.norm(y1 - y0, axis=-1) / np.abs(span)
+    valid &= (span > 0) & (speed <= vmax)
+    tau = options.epipolar_px + 0.5 * accel * np.abs(tt - t0) / NS * np.abs(tt - t1) / NS
+    ln = lines[idx][:, None, None, :]
+    d = np.abs(ln[..., 0] * y[..., 0] + ln[..., 1] * y[..., 1] + ln[..., 2])
+    r = np.where(valid & np.isfinite(d), d / tau, np.inf).reshape(len(idx), -1)
+    k = np.argmin(r, axis=1)
+    rk = r[np.arange(len(idx)), k]
+    better = rk < best[idx]
+    best[idx[better]] = rk[better]
+    best_uv[idx[better]] = y.reshape(len(idx), -1, 2)[np.arange(len(idx)), k][better]
 
 
 def _support_one(t: int, line, keys: list[int], usable, search, wait_ns: int, causal: bool,

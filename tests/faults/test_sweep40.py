@@ -292,3 +292,42 @@ def test_an_oversized_field_names_its_own_line(inputs, tmp_path, command):
                   "-o", tmp_path / "o.mcap"])
     assert_one_line_error(run_pslog(*args), 1,
                           contains="f.csv: line 3: field larger than field limit")
+
+
+_NUMPY_SUPPORT = """
+import sys
+import numpy as np
+import pslog
+from pslog.fusion.gating import GatingOptions, _support, gate_common
+from pslog.fusion._prepare import default_max_gap_s
+from pslog.geometry import fundamental_matrices
+from pslog.records import NS
+s = pslog.read_session(sys.argv[1])
+c, tables = gate_common(s.detections, s.rig)
+args = (c, s.rig, fundamental_matrices(s.rig.cameras), tables, GatingOptions(),
+        round(default_max_gap_s(s.rig) * NS), False, 0)
+mine = _support(*args, compiled=False)
+if sys.argv[2] == "compare":
+    kernels = _support(*args, compiled=True)
+    assert all(np.array_equal(a, b, equal_nan=True) for a, b in zip(mine, kernels))
+print("ok", int(np.isfinite(mine[0]).sum()))
+"""
+
+
+@pytest.mark.parametrize("how", ["bounded", "compare"])
+def test_the_numpy_support_of_crowded_frames_holds_bounded_memory(inputs, tmp_path, how):
+    """The gate's numpy form (where numba cannot start) held every candidate's K² pairs of
+    another camera's frames at once: 80 candidates in each frame of one camera asked for
+    more than a 1.5 GiB address space; now blocks of 2^20 pairs (131 MB), the same bits as
+    the compiled kernels."""
+    import subprocess
+    import sys
+
+    _crowded_csv(inputs / "s.mcap", tmp_path / "crowded.csv", 80, ("cam1",), 63013)
+    done = run_pslog("import", "--rig", "paper3", "--detections", tmp_path / "crowded.csv",
+                     "-o", tmp_path / "crowded.mcap")
+    assert done.code == 0, done.stderr
+    run = subprocess.run([sys.executable, "-c", _NUMPY_SUPPORT, str(tmp_path / "crowded.mcap"),
+                          how], capture_output=True, text=True, timeout=300,
+                         preexec_fn=_address_space(3 << 29) if how == "bounded" else None)
+    assert run.returncode == 0 and run.stdout.startswith("ok"), run.stderr[-800:]
