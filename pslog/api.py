@@ -379,6 +379,11 @@ def sync(session: Session | str | os.PathLike[str],
             gated_note += "; " + _LOST_NOTE.format(lost=lost[0], seen=lost[1])
     if gated_note:
         notes.append(gated_note)
+    if len(obs) == 0 and detections.n_candidates:  # (the gating rejected every one)
+        raise FusionError(f"{read.path}: all {detections.n_candidates} candidates rejected "
+                          f"by gating, no frame's ball passed its epipolar and motion tests "
+                          f"(frames too crowded to tell the ball, or clocks further apart "
+                          f"than they allow): nothing to sync on")
     if len(obs) == 0:
         raise FusionError(f"{read.path} has no detection: nothing to sync on")
     # auto's drift test on the ball's observations' span, as select_clocks decides it (the

@@ -331,3 +331,22 @@ def test_the_numpy_support_of_crowded_frames_holds_bounded_memory(inputs, tmp_pa
                           how], capture_output=True, text=True, timeout=300,
                          preexec_fn=_address_space(3 << 29) if how == "bounded" else None)
     assert run.returncode == 0 and run.stdout.startswith("ok"), run.stderr[-800:]
+
+
+def test_sync_of_a_session_whose_every_candidate_the_gate_rejects_says_so(tmp_path):
+    """Two cameras, 40 candidates in every frame: the gate keeps none (the ball cannot be
+    told among them), and ``pslog sync`` said the session 'has no detection' (3600 of
+    them)."""
+    done = run_pslog("simulate", "--rig", "paper2", "--timing", "typeA", "--motion", "throw",
+                     "--noise-px", "0.3", "--seed", "63007", "-o", tmp_path / "s.mcap")
+    assert done.code == 0, done.stderr
+    _crowded_csv(tmp_path / "s.mcap", tmp_path / "c.csv", 40, ("cam1", "cam2"), 63014)
+    done = run_pslog("import", "--rig", "paper2", "--detections", tmp_path / "c.csv", "-o",
+                     tmp_path / "c.mcap")
+    assert done.code == 0, done.stderr
+    before = fingerprint(tmp_path)
+    run = run_pslog("sync", tmp_path / "c.mcap", "-o", tmp_path / "synced.mcap")
+    assert_one_line_error(run, 1, contains=(
+        "c.mcap: all 3600 candidates rejected by gating, no frame's ball passed its epipolar "
+        "and motion tests", "nothing to sync on"))
+    assert_untouched(before, tmp_path)
