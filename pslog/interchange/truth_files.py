@@ -23,6 +23,7 @@ format's (naming the offset) and one whose positions look like millimetres.
 
 from __future__ import annotations
 
+import codecs
 import csv
 import io
 from collections.abc import Sequence
@@ -36,6 +37,8 @@ from ..inputs import check_input_file
 from ..log._mcapio import starts_as_mcap
 from ..records import NS, Track, Truth
 
+#: bytes of a truth file judged text or not before the rest is read
+_TEXT_PROBE_BYTES = 1 << 20
 #: the names a CSV truth's time column may have (seconds)
 TIME_COLUMNS = ("t", "time", "timestamp")
 #: a truth whose positions lie a median this far (metres) from the world origin, a hundred
@@ -88,18 +91,32 @@ def read_truth_file(path: str | Path) -> TruthFile:
     """
     path = Path(path)
     check_input_file(path)
-    try:
-        data = path.read_bytes()
-    except OSError as exc:
-        raise InputError(f"cannot read {path}: {exc.strerror or exc}") from None
     if starts_as_mcap(path):
         raise InputError(f"{path} is an MCAP session, not a truth trajectory (a CSV t,x,y,z "
                          f"or a TUM file; a session's own truth needs no --truth)")
+
+    def binary(byte: int, why: str = "is not UTF-8 text") -> InputError:
+        return InputError(f"{path}: not a text file (byte {byte} {why}); expected a CSV "
+                          f"t,x,y,z or a TUM trajectory")
+
+    try:
+        with open(path, "rb") as handle:
+            # (its first MiB judged before the rest is read: a video given by mistake, GBs,
+            # was read whole into memory, twice, before 'not a text file')
+            data = handle.read(_TEXT_PROBE_BYTES)
+            try:
+                codecs.getincrementaldecoder("utf-8")().decode(data, final=False)
+            except UnicodeDecodeError as exc:
+                raise binary(exc.start) from None
+            if b"\0" in data:
+                raise binary(data.index(b"\0"), "is a NUL")
+            data += handle.read()
+    except OSError as exc:
+        raise InputError(f"cannot read {path}: {exc.strerror or exc}") from None
     try:
         text = data.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
-        raise InputError(f"{path}: not a text file (byte {exc.start} is not UTF-8 text); "
-                         f"expected a CSV t,x,y,z or a TUM trajectory") from None
+        raise binary(exc.start) from None
     first = next((line.strip() for line in text.splitlines() if line.strip()), "")
     if not first:
         raise InputError(f"{path}: empty file (expected a CSV t,x,y,z or a TUM trajectory)")

@@ -350,3 +350,20 @@ def test_sync_of_a_session_whose_every_candidate_the_gate_rejects_says_so(tmp_pa
         "c.mcap: all 3600 candidates rejected by gating, no frame's ball passed its epipolar "
         "and motion tests", "nothing to sync on"))
     assert_untouched(before, tmp_path)
+
+
+@pytest.mark.parametrize("first", [b"\xff", b"\0"])
+def test_a_huge_binary_file_given_as_the_truth_is_refused_without_reading_it(inputs, tmp_path,
+                                                                            first):
+    """A video given by mistake: the truth file was read whole into memory (twice: bytes,
+    then text) before 'not a text file' (1 GB: 2 GB and 1.7 s); under an 800 MB address
+    space a 1.5 GB file was 'out of memory'. Now its first MiB is judged first (a NUL byte:
+    no text file either, where a file of zeros read as a header of NULs)."""
+    big = tmp_path / "video.mp4"
+    with open(big, "wb") as f:  # (sparse: no disk used)
+        f.write(first)
+        f.truncate(1_500_000_000)
+    run = run_pslog("eval", inputs / "f.mcap", "--truth", big,
+                    preexec_fn=_address_space(800 << 20))
+    why = "is not UTF-8 text" if first == b"\xff" else "is a NUL"
+    assert_one_line_error(run, 1, contains=f"video.mp4: not a text file (byte 0 {why})")
