@@ -37,6 +37,7 @@ original times come back to the nanosecond. Times are never converted through fl
 
 from __future__ import annotations
 
+import codecs
 import csv
 from decimal import ROUND_HALF_EVEN, Decimal, InvalidOperation
 from pathlib import Path
@@ -196,8 +197,24 @@ def read_detections_csv(path, rig: Rig, camera: str | None = None) -> Detections
         raise InputError(f"cannot read {path}: {exc.strerror or exc}") from None
     index = {name: i for i, name in enumerate(rig.names)}
     cams, times, frames, uv, scores, lines, missed = [], [], [], [], [], [], []
+    head = _head(path)
+    nul = head.find(b"\0")
+    try:  # (invalid UTF-8 before it: said so below, as the reader meets it)
+        codecs.getincrementaldecoder("utf-8")().decode(head[:nul] if nul >= 0 else b"")
+    except UnicodeDecodeError:
+        nul = -1
+    if nul >= 0:  # (a text file holds none: a file of zeros was read whole as one line)
+        handle.close()
+        from ._mcapio import starts_as_mcap
+
+        if starts_as_mcap(path):
+            raise InputError(f"{path} is an MCAP session, not a detections CSV (export "
+                             f"its detections with 'pslog export {shell_word(path)} "
+                             f"--detections DET.csv')")
+        raise InputError(f"{path}: not a text CSV file (byte {nul} is a NUL); expected "
+                         f"header {expected}")
     with handle:
-        reader = csv.reader(handle, delimiter="\t" if _tab_separated(path) else ",")
+        reader = csv.reader(handle, delimiter="\t" if _tab_separated(head) else ",")
         try:
             header = next(reader, None)
         except UnicodeDecodeError as exc:  # (not the codec's own words)
@@ -281,15 +298,20 @@ def read_detections_csv(path, rig: Rig, camera: str | None = None) -> Detections
                                  np.asarray(lines, np.int64), np.asarray(missed, bool))
 
 
-def _tab_separated(path: Path) -> bool:
-    """Whether the file's first line holds tabs and no comma: a tab-separated file (a .tsv,
-    a spreadsheet's "text, tab delimited"), read as such."""
+def _head(path: Path) -> bytes:
+    """The file's first MiB (empty where it cannot be read: its reader says why)."""
     try:
         with open(path, "rb") as raw:
-            head = raw.readline(1 << 16).lstrip(b"\r\n")
+            return raw.read(1 << 20)
     except OSError:
-        return False  # (the open below says why)
-    return b"\t" in head and b"," not in head
+        return b""
+
+
+def _tab_separated(head: bytes) -> bool:
+    """Whether the first line of ``head`` holds tabs and no comma: a tab-separated file (a
+    .tsv, a spreadsheet's "text, tab delimited"), read as such."""
+    line = head.lstrip(b"\r\n").partition(b"\n")[0]
+    return b"\t" in line and b"," not in line
 
 
 def read_camera_csvs(files, rig: Rig) -> Detections:

@@ -367,3 +367,16 @@ def test_a_huge_binary_file_given_as_the_truth_is_refused_without_reading_it(inp
                     preexec_fn=_address_space(800 << 20))
     why = "is not UTF-8 text" if first == b"\xff" else "is a NUL"
     assert_one_line_error(run, 1, contains=f"video.mp4: not a text file (byte 0 {why})")
+
+
+def test_a_huge_file_of_zeros_given_as_a_camera_csv_is_refused_without_reading_it(tmp_path):
+    """NUL bytes are valid UTF-8: a file of zeros was read whole as one line (1.5 GB: 'out of
+    memory' under an 800 MB address space) before the csv module's 'line contains NUL'."""
+    zeros = tmp_path / "cam1.csv"
+    with open(zeros, "wb") as f:  # (sparse: no disk used)
+        f.truncate(1_500_000_000)
+    before = fingerprint(tmp_path)
+    run = run_pslog("import", "--rig", "paper3", "--detections", f"cam1={zeros}", "-o",
+                    tmp_path / "o.mcap", preexec_fn=_address_space(800 << 20))
+    assert_one_line_error(run, 1, contains="cam1.csv: not a text CSV file (byte 0 is a NUL)")
+    assert_untouched(before, tmp_path)
