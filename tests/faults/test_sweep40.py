@@ -380,3 +380,28 @@ def test_a_huge_file_of_zeros_given_as_a_camera_csv_is_refused_without_reading_i
                     tmp_path / "o.mcap", preexec_fn=_address_space(800 << 20))
     assert_one_line_error(run, 1, contains="cam1.csv: not a text CSV file (byte 0 is a NUL)")
     assert_untouched(before, tmp_path)
+
+
+def test_the_apis_errors_show_a_numpy_array_on_one_line(inputs):
+    """``pslog.fuse(clock_uncertainty=np.eye(2, dtype=bool))``, ``read_session(np.eye(3))``,
+    ``check_pattern(np.arange(10**6))``: the error named the array by its repr, over several
+    lines (a message of one line is the convention of every PslogError)."""
+    from pslog.calibration.chessboard import check_pattern
+    from pslog.errors import PslogError
+
+    session = pslog.read_session(inputs / "s.mcap")
+    calls = [
+        (lambda: pslog.fuse(session, "typeA", clock_uncertainty=np.eye(2, dtype=bool)),
+         "clock_uncertainty array([[ True, False], [False, True]]): give True or False"),
+        (lambda: pslog.read_session(np.eye(2)),
+         "read_session: path array([[1., 0.], [0., 1.]]): give a file name"),
+        (lambda: pslog.fuse(session, "typeA", rig=np.eye(2)), "rig array([[1., 0.], [0., 1.]])"),
+        (lambda: check_pattern(np.arange(10**6)),
+         "bad chessboard pattern array([ 0, 1, 2, ..., 999997, 999998, 999999], "
+         "shape=(1000000,)): expected COLSxROWS"),
+        (lambda: pslog.evaluate(np.eye(2), session.truth), "evaluate: tracks array([[1., 0.],"),
+    ]
+    for call, says in calls:
+        with pytest.raises(PslogError) as error:
+            call()
+        assert "\n" not in str(error.value) and says in str(error.value), str(error.value)
