@@ -118,8 +118,16 @@ def _named_files(values: list[str], rig) -> dict[str, str] | int:
 
     from ._common import usage_error
 
+    def split(value: str) -> tuple[str, str, str]:
+        # (a rig camera's name may hold '=' itself: the longest name the value starts with)
+        own = [n for n in rig.names if value.startswith(n + "=")]
+        if own:
+            name = max(own, key=len)
+            return name, "=", value[len(name) + 1:]
+        return value.partition("=")
+
     def camera_of(value: str) -> str | None:
-        name, sep, _path = value.partition("=")
+        name, sep, _path = split(value)
         if not sep or (name not in rig.names and len(values) == 1 and os.path.exists(value)):
             return None  # (a file named with an '=' given alone: taken whole)
         return name
@@ -129,7 +137,7 @@ def _named_files(values: list[str], rig) -> dict[str, str] | int:
         return {}
     named: dict[str, str] = {}
     for value, name in zip(values, names, strict=True):
-        path = value.partition("=")[2]
+        path = split(value)[2]
         if name is None or name not in rig.names:
             return usage_error("import", f"argument --detections {value}: no camera "
                                          f"{name!r} in the rig (it has {', '.join(rig.names)}); "

@@ -405,3 +405,23 @@ def test_the_apis_errors_show_a_numpy_array_on_one_line(inputs):
         with pytest.raises(PslogError) as error:
             call()
         assert "\n" not in str(error.value) and says in str(error.value), str(error.value)
+
+
+def test_a_rig_camera_whose_name_holds_an_equals_sign_takes_its_file(inputs, tmp_path):
+    """A rig may name a camera ``left=2``; ``--detections left=2=cam2.csv`` was split at the
+    first '=', 'no camera 'left' in the rig' (exit 2): that camera's file could not be given."""
+    shown = run_pslog("rig", "show", "paper3")
+    assert shown.code == 0, shown.stderr
+    (tmp_path / "rig.toml").write_text(shown.stdout.replace('name = "cam2"', 'name = "left=2"'))
+    done = run_pslog("export", inputs / "s.mcap", "--detections", tmp_path / "det.csv")
+    assert done.code == 0, done.stderr
+    lines = (tmp_path / "det.csv").read_text().splitlines()
+    for camera in ("cam1", "cam2"):
+        own = [r.partition(",")[2] for r in lines[1:] if r.startswith(camera + ",")]
+        (tmp_path / f"{camera}.csv").write_text(
+            "\n".join([lines[0].partition(",")[2], *own]) + "\n")
+    run = run_pslog("import", "--rig", "rig.toml", "--detections", "cam1=cam1.csv",
+                    "--detections", "left=2=cam2.csv", "-o", "o.mcap", cwd=tmp_path)
+    assert run.code == 0, run.stderr
+    d = pslog.read_session(tmp_path / "o.mcap").detections
+    assert d.camera_names[1] == "left=2" and np.count_nonzero(d.frame_camera == 1) == 45
