@@ -1796,8 +1796,12 @@ def _decide_compiled(c: _Candidates, starts: np.ndarray, ends: np.ndarray, table
     h_max = max(len(times) for times, _ in tables)
     k_max = max(table.shape[1] for _, table in tables)
     # the numpy support pairs every candidate with each pair of another camera's frames
-    # around it, k_max² candidate pairs: sessions of crowded frames cost that far more
-    crowd_s = len(c.camera) * k_max**2 * _PYTHON_PAIR_S if k_max >= 2 else 0.0
+    # around it, k_max² candidate pairs (every frame table is k_max wide): sessions of
+    # crowded frames cost that far more; from _KERNELS_FROM candidates the support is the
+    # compiled kernels' anyway (a 90-minute match with one frame of two candidates keeps
+    # the Python decider)
+    crowd_s = (len(c.camera) * k_max**2 * _PYTHON_PAIR_S
+               if k_max >= 2 and len(c.camera) < _KERNELS_FROM else 0.0)
     python_s = float(n_frames * (shares @ np.array(_PYTHON_S))) + crowd_s
     if WHOLE_COMPILED is not None:
         return WHOLE_COMPILED, python_s
