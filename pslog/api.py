@@ -288,7 +288,7 @@ def sync(session: Session | str | os.PathLike[str],
         check_search_s,
         estimate_clocks,
     )
-    from .rig import check_baselines
+    from .rig import Rig, check_baselines
     from .timing import (
         REGULARIZE_AUTO_JITTER_S,
         recorded_clocks,
@@ -345,6 +345,16 @@ def sync(session: Session | str | os.PathLike[str],
                 continue
             _, report = regularize_times(detections.frame_time_ns[rows],
                                          detections.frame_index[rows])
+            astray = _stamps_astray(cam.name, detections.frame_time_ns[rows],
+                                    detections.frame_index[rows])
+            if astray is not None:
+                # (frame numbers that skip no missed frame: a line through them moved every
+                # time by up to seconds, in silence; walk40)
+                if regularize == "on":
+                    raise InputError(f"{read.path}: {astray} cannot be regularized "
+                                     f"(--regularize on)")
+                notes.append(f"{astray} are not regularized")
+                continue
             if regularize == "on" or report.jitter_s > REGULARIZE_AUTO_JITTER_S:
                 wanted.append(cam.name)
         if wanted:
@@ -358,25 +368,39 @@ def sync(session: Session | str | os.PathLike[str],
                              f"zero left out of the copy")
     progress.step("choosing the ball among candidates")
     obs, gated_note, lost = _ball_candidates(detections, rig)
+    found = None  # clocks that gated the ball where the logged ones lost it
     if lost:
         # the gating at the logged clocks lost the ball itself (clocks further apart than its
         # epipolar test allows: walk39, two hosts' clocks 30 ms to 3 s apart): rough clocks
         # from each frame's best-scored candidate first (the robust fit takes a false one as
         # an outlier), and the gating again at them
+        # (session 40: offsets of seconds first scanned coarsely, by the agreement of every
+        # moving candidate with camera 1's track; the spline scan alone reaches half a
+        # frame period, and a wide --search-ms found a wrong offset)
+        start, delta, coarse_notes = _coarse_start(detections, rig)
+        rough: Rig | None
         try:
-            rough = estimate_clocks(detections.best(), rig, ("offset",), search_s,
+            rough = estimate_clocks(detections.best(), start, ("offset",), search_s,
                                     regularized=reports).rig
         except FusionError:
-            rough = None
+            # (the best-scored candidates may be a static object's, which fix no offset:
+            # the coarse scan's, within a quarter of a frame period, gates as well)
+            rough = start if np.any(delta) else None
         again = None if rough is None else _ball_candidates(detections, rough)
         if again is not None and not again[2]:
-            gated_note = (f"{again[1]}, at clocks estimated first from each frame's "
-                          f"best-scored candidate: at the logged clocks the gating lost "
-                          f"{lost[0]} of {lost[1]} frames with a candidate, the ball's too "
-                          f"(clocks further apart than it allows)")
+            moved = ", ".join(f"{cam.name} {d * 1e3:+.1f} ms"
+                              for cam, d in zip(rig.cameras, delta.tolist(), strict=True) if d)
+            gated_note = (f"{again[1]}, at clocks estimated first "
+                          + (f"by a coarse scan of the offsets ({moved}) and " if moved else "")
+                          + f"from each frame's best-scored candidate: at the logged clocks "
+                          f"the gating lost {lost[0]} of {lost[1]} frames with a candidate, "
+                          f"the ball's too (clocks further apart than it allows)")
             obs, lost = again[0], None
+            found = rough  # (the estimate below starts from its offsets)
         else:
             gated_note += "; " + _LOST_NOTE.format(lost=lost[0], seen=lost[1])
+            if coarse_notes:
+                gated_note += " (the coarse offset scan: " + "; ".join(coarse_notes) + ")"
     if gated_note:
         notes.append(gated_note)
     if len(obs) == 0 and detections.n_candidates:  # (the gating rejected every one)
@@ -390,6 +414,10 @@ def sync(session: Session | str | os.PathLike[str],
     # frames' span put a first sync's drift back to the recorded model where auto then did
     # not try drifts: the ball seen 10 s of a 31 s session, its drift lost in silence)
     rig, resynced = restart(obs.time_ns)
+    if found is not None:  # the offsets that gated the ball: where the estimate starts
+        rig = Rig(tuple(cam.replace(clock_offset=near.clock_offset)
+                        for cam, near in zip(rig.cameras, found.cameras, strict=True)),
+                  rig.name)
     prior_estimated = _prior_estimated(read.metadata)
     if prior_estimated:  # (a copy of an older pslog's, or synced from one since: each time)
         notes.insert(0, "synced before by a pslog that did not record the clock model it "
@@ -403,7 +431,28 @@ def sync(session: Session | str | os.PathLike[str],
     progress.step(f"choosing the clock model (auto) of {len(rig)} cameras" if estimate == ["auto"]
                   else f"estimating {', '.join(estimate)} of {len(rig)} clocks")
     try:
-        result = estimate_clocks(obs, rig, tuple(estimate), search_s, regularized=reports)
+        try:
+            result = estimate_clocks(obs, rig, tuple(estimate), search_s, regularized=reports)
+        except FusionError as exc:
+            # offsets beyond the scan's half frame period (two hosts' clocks seconds apart)
+            # where the gating did not lose the ball (one candidate a frame): the coarse scan,
+            # and the estimate again from its offsets (session 40)
+            if found is not None or isinstance(exc, ClockSpanError):
+                raise
+            start, delta, coarse_notes = _coarse_start(detections, rig)
+            if not np.any(delta):
+                raise
+            progress.step("estimating again from a coarse scan of the offsets")
+            obs = _ball_candidates(detections, start)[0]
+            try:
+                result = estimate_clocks(obs, start, tuple(estimate), search_s,
+                                         regularized=reports)
+            except FusionError:
+                raise exc from None
+            moved = ", ".join(f"{cam.name} {d * 1e3:+.1f} ms"
+                              for cam, d in zip(rig.cameras, delta.tolist(), strict=True) if d)
+            notes.append(f"estimated from a coarse scan of the offsets ({moved}): from the "
+                         f"rig's clocks the estimate failed ({exc})")
     except FusionError as exc:
         # with false candidates (a distractor) the failure may be theirs, not the ball's
         # motion's; say so
@@ -420,6 +469,66 @@ def sync(session: Session | str | os.PathLike[str],
     # as the prior lost the model before the first sync; review39)
     return SyncOutcome(result.rig, result, detections, obs, reports, tuple(notes),
                        recorded_clocks(read.rig, read.metadata)[0], prior_estimated)
+
+
+def _coarse_start(detections: Detections, rig: Rig) -> tuple[Rig, np.ndarray, list[str]]:
+    """``rig`` with each camera's clock offset moved by sync's coarse scan
+    (:func:`pslog.estimation.sync.coarse_offsets` over ±:data:`COARSE_SPAN_S`, at most the
+    span of the frames holding a candidate), the moves (m,) s and the scan's notes."""
+    from .estimation.sync import coarse_offsets
+    from .fusion._prepare import default_max_gap_s
+    from .rig import Rig
+
+    seen = detections.frame_time_ns[detections.candidates_per_frame() > 0]
+    span = 0.0 if not len(seen) else (int(seen.max()) - int(seen.min())) / NS
+    delta, notes = coarse_offsets(detections, rig, min(COARSE_SPAN_S, max(1.0, span)),
+                                  default_max_gap_s(rig))
+    if not np.any(delta):
+        return rig, delta, notes
+    return (Rig(tuple(cam.replace(clock_offset=cam.clock_offset + d)
+                      for cam, d in zip(rig.cameras, delta.tolist(), strict=True)), rig.name),
+            delta, notes)
+
+
+#: Steps between a camera's consecutive frame numbers longer than this many frame periods
+#: (the median step per number) count as long, shorter than 2 minus it as short.
+_LONG_STEP = 1.5
+
+
+def _stamps_astray(name: str, time_ns: np.ndarray, frame_index: np.ndarray) -> str | None:
+    """Why a camera's host stamps cannot be regularized against its frame numbers, or None.
+
+    A line of stamps against frame numbers (:func:`pslog.timing.regularize_times`) assumes
+    the numbers count the camera's frames, a dropped one leaving a gap. Numbers that skip
+    nothing where frames are missing (a detector's row counter; an import without a
+    ``frame`` column before session 40, numbered 0, 1, 2, ...) make steps of two frame
+    periods or more per number that no short step makes up for, whereas host jitter makes
+    as many short steps as long ones. Such steps in excess (more than 3 and 3 standard
+    deviations of the count) say the numbers do not count the frames: the line would move
+    every time by up to seconds (walk40: 5 % misses numbered away, 66 ms "jitter", a
+    readout of -109 ms and points 12 cm off, nothing said).
+    """
+    order = np.argsort(frame_index, kind="stable")
+    dk = np.diff(frame_index[order]).astype(np.float64)
+    dt = np.diff(time_ns[order]).astype(np.float64)
+    step = dk > 0
+    if np.count_nonzero(step) < 3:
+        return None
+    per = dt[step] / dk[step]
+    period = float(np.median(per))
+    if not period > 0:
+        return None
+    long = int(np.count_nonzero(per > _LONG_STEP * period))
+    short = int(np.count_nonzero(per < (2.0 - _LONG_STEP) * period))
+    excess = long - short
+    if excess <= max(3.0, 3.0 * float(np.sqrt(long + short))):
+        return None
+    return (f"{name}: {long} of its {len(per)} steps from one frame number to the next span "
+            f"{_LONG_STEP:g} frame periods or more (a period: {period / 1e6:.4g} ms, the "
+            f"median) and {short} under {2.0 - _LONG_STEP:g}: its frame numbers skip no "
+            f"missed frame (host jitter makes as many short steps as long ones; a frame "
+            f"column counting the detector's rows, not the camera's frames?), so its host "
+            f"stamps")
 
 
 def _prior_estimated(metadata) -> bool:
@@ -440,6 +549,10 @@ def _prior_estimated(metadata) -> bool:
         return False
 
 
+#: the half-width of sync's coarse offset scan where its gating lost the ball at the logged
+#: clocks or its estimate failed from them (:func:`pslog.estimation.sync.coarse_offsets`;
+#: at most the span of the session's frames)
+COARSE_SPAN_S = 60.0
 #: share of the frames with a candidate that losing every candidate to sync's gating (at the
 #: logged clocks) says the clocks are likely too far apart for it (walk39: 0.3 % on one clock,
 #: 39 % with one camera's clock 30 ms off)

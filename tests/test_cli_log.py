@@ -353,7 +353,9 @@ def _one_frame(rig):
     return Detections.from_frames(rig.names, [0], [0], [0], [0], [[1.0, 2.0]])
 
 
-def test_import_without_frame_column_numbers_frames_in_time_order(tmp_path, cli):
+def test_import_without_frame_column_numbers_frames_from_their_times(tmp_path, cli):
+    # (cam1's two frames 0.1 s apart at 30 fps: 3 frame periods, frames 0 and 3 since
+    # session 40, 0 and 1 before: tests/test_walk40.py)
     det_csv = tmp_path / "det.csv"
     det_csv.write_text("time,camera,v,u\n0.2,cam1,5,6\n0.1,cam1,3,4\n0.1,cam1,3.5,4.5\n"
                        "0.15,cam2,1,2\n\n")
@@ -363,7 +365,7 @@ def test_import_without_frame_column_numbers_frames_in_time_order(tmp_path, cli)
     d = read_session(out).detections
     assert_array_equal(d.frame_time_ns, [100_000_000, 150_000_000, 200_000_000])
     assert_array_equal(d.frame_camera, [0, 1, 0])
-    assert_array_equal(d.frame_index, [0, 0, 1])
+    assert_array_equal(d.frame_index, [0, 0, 3])
     assert_array_equal(d.candidates_per_frame(), [2, 1, 1])
     assert_array_equal(d.cand_uv[-1], [6.0, 5.0])
 

@@ -141,6 +141,83 @@ def test_eval_truth_file_scores_as_the_sessions_own_truth(cli, fused):
         assert b["n_points"] <= a["n_points"], (a, b)
 
 
+def _truth_rows(path, times_ns, positions, blank=None, sep=",", header=("t", "x", "y", "z")):
+    """A truth file of ``sep``-separated rows; the rows where ``blank`` (bool) holds written
+    with x, y, z empty (a motion capture's lost marker)."""
+    from pslog.log.csvio import format_time
+
+    blank = np.zeros(len(times_ns), bool) if blank is None else blank
+    lines = [sep.join(header)]
+    for t, p, gap in zip(times_ns.tolist(), positions.tolist(), blank.tolist(), strict=True):
+        lines.append(sep.join([format_time(t), *(["", "", ""] if gap else map(repr, p))]))
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def test_eval_truth_gaps_are_not_scored_across(cli, fused, tmp_path):
+    """A motion capture's lost marker (review40): rows whose x, y, z are empty are a gap in
+    the truth, the points between the samples around it not scored (counted as truth_gap),
+    every other point scored as against the session's own truth. Before, such a file was
+    refused and its message said to leave the rows out, which made the truth a straight
+    line across the gap: 0.6 s of a rally left out moves the max error by metres' tenths."""
+    from pslog.log import read_session
+
+    _, session = fused
+    own = {r["method"]: r for r in json.loads(_ok(cli, "eval", session, "--json"))}
+    truth = read_session(session).truth
+    t = truth.time_ns
+    gap = (t >= 1_000_000_000) & (t < 1_600_000_000)
+    blank = _truth_rows(tmp_path / "mocap.csv", t, truth.position_world, blank=gap)
+    text = _ok(cli, "eval", session, "--truth", blank)
+    assert f"; {int(gap.sum())} gap rows: the points between the samples around them not " \
+           f"scored)" in text.splitlines()[0], text
+    got = {r["method"]: r for r in json.loads(_ok(cli, "eval", session, "--truth", blank,
+                                                  "--json"))}
+    lo, hi = t[np.flatnonzero(gap)[0] - 1], t[np.flatnonzero(gap)[-1] + 1]
+    tracks = read_session(session).tracks
+    for method, row in got.items():
+        inside = (tracks[method].time_ns > lo) & (tracks[method].time_ns <= hi)
+        assert row["not_scored"].get("truth_gap", 0) == np.count_nonzero(inside) > 0, row
+        assert row["n_points"] + np.count_nonzero(inside) == own[method]["n_points"]
+        assert row["max_mm"] <= own[method]["max_mm"], (row, own[method])
+    # the same rows left out: the truth a straight line across the 0.6 s (what the old
+    # message said to do): every point scored, far worse somewhere
+    left = _truth_rows(tmp_path / "left.csv", t[~gap], truth.position_world[~gap])
+    across = {r["method"]: r for r in json.loads(_ok(cli, "eval", session, "--truth", left,
+                                                     "--json"))}
+    assert max(across[m]["max_mm"] - own[m]["max_mm"] for m in own) > 50, across
+    # TUM: a gap row's tx ty tz NaN; a partial row stays refused, naming it
+    tum = tmp_path / "gap.tum"
+    tum.write_text("".join(f"{format_s} {'nan nan nan' if g else ' '.join(map(repr, p))}\n"
+                           for format_s, p, g in zip((f"{x / 1e9:.9f}" for x in t.tolist()),
+                                                     truth.position_world.tolist(),
+                                                     gap.tolist(), strict=True)))
+    assert json.loads(_ok(cli, "eval", session, "--truth", tum, "--json")) == list(
+        got.values())
+    err = _one_line_error(cli, 1, "eval", session, "--truth",
+                          _lines(tmp_path / "part.csv", "t,x,y,z\n0.5,1,2,0.5\n0.6,,,0.5\n"
+                                                        "0.7,1,2,0.5\n"))
+    assert "line 3: x value '': empty" in err and "x, y and z all empty" in err, err
+    err = _one_line_error(cli, 1, "eval", session, "--truth",
+                          _lines(tmp_path / "gaps.csv", "t,x,y,z\n0.5,1,2,0.5\n0.6,,,\n"))
+    assert "1 sample with a position (1 gap rows): a truth needs two" in err, err
+
+
+def test_eval_truth_tab_separated(cli, fused, tmp_path):
+    """A tab-separated truth (a .tsv, as Qualisys exports; or a header of tabs without a
+    comma) is read as its CSV (review40: it was refused, 'bad header 't\\tx\\ty\\tz''),
+    the same figures as the session's own truth."""
+    from pslog.log import read_session
+
+    _, session = fused
+    own = json.loads(_ok(cli, "eval", session, "--json"))
+    truth = read_session(session).truth
+    for name in ("mocap.tsv", "mocap.txt"):
+        path = _truth_rows(tmp_path / name, truth.time_ns, truth.position_world, sep="\t",
+                           header=("time", "x", "y", "z"))
+        assert json.loads(_ok(cli, "eval", session, "--truth", path, "--json")) == own, name
+
+
 def test_eval_truth_on_the_clock_export_writes(cli, fused, tmp_path):
     """An imported session on Unix-epoch times: a CSV truth on that clock (as export --csv
     writes the tracks' times) and a TUM truth on the session clock (as export --tum) give the
@@ -183,7 +260,7 @@ def test_eval_truth_on_the_clock_export_writes(cli, fused, tmp_path):
                      add_s=Decimal("0.25"))
     err = _one_line_error(cli, 1, "eval", fused_unix, "--truth",
                           tmp_path / "session_truth.csv")
-    assert "are on the session clock, but a CSV truth's are on the original clock" in err, err
+    assert "span the session clock's, but a CSV truth's are on the original clock" in err, err
     assert "add the session's clock origin 1764860000.000000000 s to every time" in err, err
     with open(tmp_path / "unix.tum", "w") as fh:
         for t, (x, y, z) in zip(truth.time_ns.tolist(), truth.position_world.tolist(),
@@ -301,6 +378,31 @@ def test_import_one_csv_per_camera_equals_the_joined_csv(cli, fused, tmp_path):
                "-o", one)
     assert "note: no --detections CAMERA=FILE for cameras cam1, cam3: nothing of them to " \
            "fuse" in said, said
+    # a camera that saw nothing, its file a header alone (review40: the import was refused,
+    # 'no detection rows', the other cameras' rows with it): the session of the joined CSV
+    # without that camera's rows, the camera named in a note; every file empty: refused
+    blind = tmp_path / "blind.csv"
+    blind.write_text(files["cam3"].read_text().splitlines()[0] + "\n")
+    with open(det, newline="") as fh:
+        rows = list(csv.reader(fh))
+    with open(tmp_path / "two.csv", "w", newline="") as fh:
+        csv.writer(fh).writerows([rows[0], *(r for r in rows[1:] if r[0] != "cam3")])
+    two, per2 = tmp_path / "two.mcap", tmp_path / "per2.mcap"
+    _ok(cli, "import", "--rig", "paper3", "--detections", tmp_path / "two.csv", "-o", two)
+    said = _ok(cli, "import", "--rig", "paper3", "--detections", f"cam1={files['cam1']}",
+               "--detections", f"cam2={files['cam2']}", "--detections", f"cam3={blind}",
+               "-o", per2)
+    assert f"note: {blind} has no rows of camera cam3: nothing of it to fuse" in said, said
+    a, b = read_session(two), read_session(per2)
+    assert a.detections.n_frames == b.detections.n_frames > 0
+    for field in ("frame_time_ns", "frame_camera", "frame_index", "cand_frame", "cand_uv",
+                  "cand_score"):
+        assert np.array_equal(getattr(a.detections, field), getattr(b.detections, field),
+                              equal_nan=True), field
+    err = _one_line_error(cli, 1, "import", "--rig", "paper3", "--detections",
+                          f"cam3={blind}", "-o", tmp_path / "none.mcap")
+    assert err.endswith(f"{blind}: no detection rows"), err
+    assert not (tmp_path / "none.mcap").exists()
 
 
 def test_import_per_camera_errors(cli, fused, tmp_path):

@@ -304,6 +304,7 @@ def load_view_data(session_paths: str | Path | Sequence[str | Path], *,
         raise InputError("no session file given")
     from pslog.errors import shell_word
     from pslog.outputs import same_file
+    from pslog.timing import CLOCK_STD_KEY
 
     for i, path in enumerate(paths):  # (its tracks would be shown twice, renamed)
         for earlier in paths[:i]:
@@ -327,8 +328,21 @@ def load_view_data(session_paths: str | Path | Sequence[str | Path], *,
                          f"'pslog view {shell_word(path)}')")
             continue
         if not np.array_equal(other.detections.frame_time_ns, session.detections.frame_time_ns):
-            notes.append(f"{path}: its frames are not {paths[0]}'s, so its tracks may come "
-                         f"from another session")
+            mine, its = session.detections, other.detections
+            synced = (other.metadata or {}).get(CLOCK_STD_KEY) and not (
+                session.metadata or {}).get(CLOCK_STD_KEY)
+            if synced and np.array_equal(*(
+                    np.sort(d.frame_camera.astype(np.int64) << 40 | d.frame_index)
+                    for d in (its, mine))):  # (times regularized: frames reordered)
+                # (the same frames at other times: a synced copy's regularized host stamps,
+                # fused; "may come from another session" sent walk40 looking for one)
+                notes.append(f"{path}: the same frames as {paths[0]}'s at other times (host "
+                             f"stamps 'pslog sync' regularized): its tracks are shown beside "
+                             f"{paths[0]}'s logged times and clocks; 'pslog view "
+                             f"{shell_word(path)}' shows it with the ones it was fused with")
+            else:
+                notes.append(f"{path}: its frames are not {paths[0]}'s, so its tracks may "
+                             f"come from another session")
         for name, track in other.tracks.items():
             if name in tracks:
                 new = f"{name}_{_safe_name(path.stem)}"

@@ -100,13 +100,23 @@ def run(args: argparse.Namespace) -> int:
     apart = _apart_in_time(detections)
     if apart is not None:
         print(apart)
+    gaps = _frames_without_row(detections)
+    if gaps is not None:
+        print(gaps)
+    phases = _phases_off_the_rig(detections, rig, output)
+    if phases is not None:
+        print(phases)
     unseen = [name for c, name in enumerate(rig.names)
               if not (detections.frame_camera == c).any()]
     if unseen:  # (a rig camera without a row: its CSV left out?)
+        for name in (n for n in unseen if n in named):  # (given: a camera that saw nothing)
+            print(f"note: {named[name]} has no rows of camera {name}: nothing of it to fuse")
+        unseen = [n for n in unseen if n not in named]
         them = f"{'s' if len(unseen) > 1 else ''} {', '.join(unseen)}"
-        print((f"note: no --detections CAMERA=FILE for camera{them}" if named else
-               f"note: {label} has no frame of camera{them}")
-              + f": nothing of {'them' if len(unseen) > 1 else 'it'} to fuse")
+        if unseen:
+            print((f"note: no --detections CAMERA=FILE for camera{them}" if named else
+                   f"note: {label} has no frame of camera{them}")
+                  + f": nothing of {'them' if len(unseen) > 1 else 'it'} to fuse")
     return 0
 
 
@@ -169,6 +179,49 @@ def _same_file(a: str, b: str) -> bool:
         return os.path.samefile(a, b)
     except OSError:
         return os.path.normpath(a) == os.path.normpath(b)
+
+
+def _phases_off_the_rig(detections, rig, output) -> str | None:
+    """A note when the CSV's times put some camera's shutters more than 2 ms from the rig's
+    offsets (:func:`pslog.log.info.offset_disagreements`, as ``pslog record`` says it): the
+    cameras' clocks or shutters are not where the rig plans them, which ``pslog sync``
+    estimates. walk40's lab (webcams, host clocks off, offsets 0 in its rig file) fused its
+    import without sync at 20-30 mm, 2-7 mm synced, and nothing had said so."""
+    from pslog.errors import shell_word
+    from pslog.log.info import offset_disagreements
+
+    off = offset_disagreements(detections, rig)
+    if not off:
+        return None
+    listed = ", ".join(f"{name} {(measured % rig.camera(name).frame_period) * 1e3:.1f} ms "
+                       f"(rig {nominal * 1e3:.1f} ms)" for name, measured, nominal in off)
+    return (f"note: the times put the shutters of {listed}, relative to "
+            f"{rig.names[0]}'s, not where the rig's offsets plan them: clocks without genlock "
+            f"(or the rig's offsets wrong); 'pslog sync {shell_word(output)} -o SYNCED.mcap' "
+            f"estimates each camera's clock from the ball, then fuse that")
+
+
+def _frames_without_row(detections) -> str | None:
+    """A note naming each camera's frame numbers without a row (a detector that writes
+    nothing for a frame without a ball, whose frames its ``frame`` column or, without one,
+    its times number): ``pslog info``'s detection rates count only the frames given, and
+    read 100 % for a camera that missed the ball in 5 % of its frames (walk40)."""
+    import numpy as np
+
+    parts = []
+    for c, name in enumerate(detections.camera_names):
+        k = np.unique(detections.frame_index[detections.frame_camera == c])
+        if len(k) < 2:
+            continue
+        spanned = int(k[-1] - k[0] + 1)
+        if spanned > len(k):
+            parts.append(f"{name} {spanned - len(k)} of {spanned}")
+    if not parts:
+        return None
+    return (f"note: frame numbers without a row (frames the detector wrote nothing for, or "
+            f"the camera dropped): {', '.join(parts)}; they count as no frame, so 'pslog "
+            f"info' rates the detections of the frames given only: write a row with u and v "
+            f"empty for a frame without a detection to count it as missed")
 
 
 def _apart_in_time(detections) -> str | None:

@@ -1131,3 +1131,170 @@ def _check_motion(problem, control, unknowns, std, rig, theta, span_s: float) ->
                                  f"the session ({span_s:.1f} s) is too short for a drift: "
                                  f"it needs at least {AUTO_DRIFT_MIN_S:.0f} s"
                                  if short else "the ball needs to move more"))
+
+
+#: the coarse offset scan (:func:`coarse_offsets`): its grid step, as a share of the frame
+#: period of the slower camera of each pair; its epipolar tolerance, pixels (on undistorted
+#: pixels, camera 1's interpolated to the other's time: a ball at 500 px/s moves 2 px in a
+#: step of 30 fps); detections of the scanned camera used at most (evenly spaced)
+COARSE_STEP = 0.25
+COARSE_TOL_PX = 6.0
+_COARSE_DETECTIONS = 3000
+#: a coarse offset stands only where its agreeing detections exceed the chance level (the
+#: median count over the scanned offsets) by at least this many, by this many times the
+#: chance count's own spread (its square root), and by this many times the excess of any
+#: offset further than _COARSE_APART_S from the peak's stretch (a second peak)
+COARSE_MIN_AGREE = 30
+COARSE_OVER_NOISE = 6.0
+COARSE_OVER_SECOND = 1.5
+_COARSE_APART_S = 0.05
+#: still pixels (a static object, a ball at rest): a candidate with this share of its
+#: camera's candidates within _STILL_PX of it (they agree with any offset: left out)
+_STILL_SHARE = 0.02
+_STILL_PX = 3.0
+
+
+def coarse_offsets(detections, rig: Rig, search_s: float,
+                   max_gap_s: float) -> tuple[np.ndarray, list[str]]:
+    """Each camera's clock offset against camera 1's to a few milliseconds over
+    ``±search_s`` (seconds to a minute: two hosts' clocks), from the ball's pixels alone.
+
+    Every candidate of every frame is used but still ones (a pixel where
+    :data:`_STILL_SHARE` of its camera's candidates lie within :data:`_STILL_PX`: a static
+    object, a ball at rest, which agree at any offset). Camera 1's track: its first such
+    candidate a frame. For a trial offset δ of camera c, its candidates at times ``t + δ``
+    (the rig's clocks as they stand, then δ) are compared with that track: camera 1's
+    undistorted pixel linearly interpolated to that time (between its two detections around
+    it, no further apart than ``max_gap_s``) must lie within :data:`COARSE_TOL_PX` of the
+    epipolar line of camera c's undistorted pixel (``x_1ᵀ F_c1 x_c = 0``). The count of
+    such agreeing candidates peaks at the true offset (the ball's pixels correspond) and
+    stays at chance elsewhere (a pixel near a random line: a few %); false candidates only
+    add to chance. δ is scanned on a grid of :data:`COARSE_STEP` frame periods over
+    ``±search_s``; the best δ stands where its count's excess over chance (the median
+    count) passes :data:`COARSE_MIN_AGREE`, :data:`COARSE_OVER_NOISE` times the chance
+    count's square root and :data:`COARSE_OVER_SECOND` times any other peak's excess (a
+    periodic motion), else that camera keeps 0 and a note says why. The fine offset is then
+    the spline scan's and the joint estimate's (:func:`estimate_clocks` from the shifted
+    rig).
+
+    Parameters
+    ----------
+    detections : pslog.records.Detections, every candidate (LOGGED times)
+    rig : Rig, its clock model applied as it stands
+    search_s : float, the half-width scanned, s
+    max_gap_s : float, the widest pair of camera 1's detections interpolated, s
+
+    Returns
+    -------
+    delta : (m,) float, s, to add to each camera's ``clock_offset`` (0 for camera 1 and for
+        cameras whose offset is not determined)
+    notes : list of str, one per camera left at 0
+    """
+    from ..geometry import fundamental_matrices
+    from ..timing import true_times_ns
+
+    m = len(rig)
+    delta = np.zeros(m)
+    notes: list[str] = []
+    p = camera_parameters(rig)
+    frame = detections.cand_frame
+    cam = detections.frame_camera[frame].astype(np.int64)
+    uv = detections.cand_uv
+    t = true_times_ns(detections.frame_time_ns[frame], uv[:, 1], p["height"][cam],
+                      p["clock_offset"][cam], p["clock_drift_ppm"][cam],
+                      p["readout"][cam]) / NS
+    und = np.full((len(cam), 2), np.nan)
+    keep = np.zeros(len(cam), dtype=bool)
+    for c, camera in enumerate(rig.cameras):
+        rows = np.flatnonzero(cam == c)
+        if not len(rows):
+            continue
+        und[rows] = camera.undistort(uv[rows])
+        keep[rows] = np.all(np.isfinite(und[rows]), axis=1) & ~_still(uv[rows])
+    F = fundamental_matrices(rig.cameras)
+    first = np.flatnonzero((cam == 0) & keep)
+    if len(first):  # camera 1's track: its first kept candidate a frame
+        first = first[np.r_[True, frame[first][1:] != frame[first][:-1]]]
+    first = first[np.argsort(t[first], kind="stable")]
+    t0, u0 = t[first], und[first]
+    for c in range(1, m):
+        rows = np.flatnonzero((cam == c) & keep)
+        name = rig.cameras[c].name
+        if len(rows) < COARSE_MIN_AGREE or len(t0) < 2:
+            notes.append(f"camera {name}: too few moving detections for the coarse offset "
+                         f"scan ({len(rows)}, camera {rig.cameras[0].name} {len(t0)})")
+            continue
+        rows = rows[np.unique(np.linspace(0, len(rows) - 1, _COARSE_DETECTIONS).astype(int))]
+        tc = t[rows]
+        # camera c's pixels' epipolar lines in camera 1's image (a u + b v + c = 0, a² + b²
+        # = 1: distances in pixels)
+        lines = np.column_stack([und[rows], np.ones(len(rows))]) @ F[c, 0].T
+        with np.errstate(invalid="ignore", divide="ignore"):
+            lines = lines / np.hypot(lines[:, 0], lines[:, 1])[:, None]
+        period = max(1 / rig.cameras[0].fps, 1 / rig.cameras[c].fps)
+        step = COARSE_STEP * period
+        grid = np.arange(-search_s, search_s + step / 2, step)
+        counts = np.zeros(len(grid), dtype=np.int64)
+        chunk = max(1, 2_000_000 // len(rows))
+        for s in range(0, len(grid), chunk):
+            at = tc[None, :] + grid[s:s + chunk, None]  # (k, n) camera 1's times
+            j = np.clip(np.searchsorted(t0, at), 1, len(t0) - 1)
+            ta, tb = t0[j - 1], t0[j]
+            inside = (ta <= at) & (at <= tb) & (tb - ta <= max_gap_s)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                w = np.where(tb > ta, (at - ta) / (tb - ta), 0.0)
+                uu = u0[j - 1, 0] + w * (u0[j, 0] - u0[j - 1, 0])
+                vv = u0[j - 1, 1] + w * (u0[j, 1] - u0[j - 1, 1])
+                d = np.abs(lines[:, 0] * uu + lines[:, 1] * vv + lines[:, 2])
+            counts[s:s + chunk] = np.count_nonzero(inside & (d <= COARSE_TOL_PX), axis=1)
+        k = int(np.argmax(counts))
+        chance = float(np.median(counts))
+        excess = counts[k] - chance
+        # the peak's own stretch: the offsets around it whose excess is at least half its
+        # own (a slow ball agrees over a few steps), and _COARSE_APART_S either side
+        half = counts >= chance + 0.5 * excess
+        lo, hi = k, k
+        while lo > 0 and half[lo - 1]:
+            lo -= 1
+        while hi < len(grid) - 1 and half[hi + 1]:
+            hi += 1
+        far = (grid < grid[lo] - _COARSE_APART_S) | (grid > grid[hi] + _COARSE_APART_S)
+        second = float(counts[far].max()) - chance if np.any(far) else 0.0
+        if excess < COARSE_MIN_AGREE or excess < COARSE_OVER_NOISE * np.sqrt(max(chance, 1.0)):
+            notes.append(f"camera {name}: no offset within ±{search_s:g} s makes its "
+                         f"detections agree with camera {rig.cameras[0].name}'s "
+                         f"({int(counts[k])} of {len(rows)} at best, {chance:.0f} by chance)")
+            continue
+        if excess < COARSE_OVER_SECOND * second:
+            notes.append(f"camera {name}: its offset is ambiguous within ±{search_s:g} s "
+                         f"({int(counts[k])} agreeing detections at {grid[k] * 1e3:+.1f} ms, "
+                         f"{int(counts[far].max())} at "
+                         f"{grid[far][np.argmax(counts[far])] * 1e3:+.1f} ms)")
+            continue
+        delta[c] = 0.5 * (grid[lo] + grid[hi])  # (the stretch's middle)
+    return delta, notes
+
+
+def _still(uv: np.ndarray) -> np.ndarray:
+    """(n,) bool: the pixels ``uv`` (n, 2) of one camera with at least :data:`_STILL_SHARE`
+    of them within about :data:`_STILL_PX` (counted on a grid of that size, each pixel's
+    cell and its eight neighbours)."""
+    cell = np.floor(uv / _STILL_PX)
+    ok = np.all(np.isfinite(cell), axis=1)
+    still = np.zeros(len(uv), dtype=bool)
+    if not ok.any():
+        return still
+    keys, inverse, counts = np.unique(cell[ok].astype(np.int64), axis=0, return_inverse=True,
+                                      return_counts=True)
+    total = np.zeros(len(keys), dtype=np.int64)
+    for du in (-1, 0, 1):
+        for dv in (-1, 0, 1):
+            shifted = keys + np.array([du, dv])
+            # the count of the cell at ``shifted`` (keys sorted lexicographically)
+            at = np.searchsorted(keys[:, 0] * (1 << 32) + keys[:, 1],
+                                 shifted[:, 0] * (1 << 32) + shifted[:, 1])
+            at = np.minimum(at, len(keys) - 1)
+            hit = np.all(keys[at] == shifted, axis=1)
+            total += np.where(hit, counts[at], 0)
+    still[ok] = total[inverse.ravel()] >= _STILL_SHARE * len(uv)
+    return still

@@ -26,6 +26,7 @@ tolerance, so their point at ``t`` may also use detections up to ``t + tolerance
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from functools import partial
@@ -547,13 +548,38 @@ def default_methods(
             and np.any(detections.candidates_per_frame() > 1)):
         # (the gate only where its choice could move the instants; ~0.1 ms a frame of
         # several candidates, the fusion's own causal pass where ``gated`` hands it on)
-        from .gating import gate, gate_common, pregated
+        from .gating import gate, gate_common, gate_for, gating_key, pregated
 
         common = gate_common(detections, rig)
-        chosen = gate(detections, rig, max_gap_s=options.max_gap_s, common=lambda: common,
-                      doubt=gated is not None)
+        # handed on: smooth's offline pass made meanwhile on a thread (smooth suits every
+        # timing: it is fused by default), as its own gate_for makes it (session 40: on a
+        # 90-minute dirty match its ~2 s then no longer wait for this pass before smooth)
+        offline: dict = {}
+        thread = None
+        if gated is not None:
+            def smooth_pass() -> None:
+                try:
+                    offline["gated"] = gate_for(detections, rig, "smooth", options,
+                                                lambda: common)
+                except BaseException as exc:  # (raised again below, on this thread)
+                    offline["error"] = exc
+
+            thread = threading.Thread(target=smooth_pass, name="pslog-gate-offline",
+                                      daemon=True)
+            thread.start()
+        try:
+            chosen = gate(detections, rig, max_gap_s=options.max_gap_s,
+                          common=lambda: common, doubt=gated is not None)
+        finally:
+            if thread is not None:
+                thread.join()
+        if "error" in offline:
+            raise offline["error"]
         if gated is not None:  # (its doubt made only where the fusion will take it)
             gated.update(pregated(chosen, common))
+            key = gating_key("smooth", options)
+            gated.update(pregated(offline["gated"], common, key,
+                                  METHODS["smooth"].uses_doubt and METHODS["smooth"].doubt))
         shared, alone = shares(chosen.observations)
     return [name for name, m in METHODS.items() if m.suits(shared, alone)]
 

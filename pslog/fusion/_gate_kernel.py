@@ -1463,14 +1463,15 @@ def session_state(c, tables, rig, options, wait_ns: int, max_gap_ns: int, F, con
         if h == 0:
             continue
         valid = table >= 0
-        r = np.maximum(table, 0)
+        r = table[valid]  # (the padding keeps the state's 0 and NaN; no (h, k) temporaries:
+        # gating._whole_bytes counts the state alone)
         state.fi[b, :h, 0] = times
         state.fi[b, :h, 2] = np.arange(h)
         state.fi[b, :h, 3] = valid.sum(axis=1)
         state.fi[b, :h, 4] = -1
-        state.ct[b, :h, :k] = np.where(valid, c.time_ns[r], 0)
-        state.cf[b, :h, :k, 0:2] = np.where(valid[..., None], c.uv_und[r], np.nan)
-        state.cf[b, :h, :k, 2:5] = np.where(valid[..., None], c.ray_dir[r], np.nan)
+        state.ct[b, :h, :k][valid] = c.time_ns[r]
+        state.cf[b, :h, :k, 0:2][valid] = c.uv_und[r]
+        state.cf[b, :h, :k, 2:5][valid] = c.ray_dir[r]
         state.csup[b, :h, :k] = 1
         state.count[b] = h
         rows[b, :h, :k] = table

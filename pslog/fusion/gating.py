@@ -1805,9 +1805,20 @@ def _decide_compiled(c: _Candidates, starts: np.ndarray, ends: np.ndarray, table
     python_s = float(n_frames * (shares @ np.array(_PYTHON_S))) + crowd_s
     if WHOLE_COMPILED is not None:
         return WHOLE_COMPILED, python_s
-    if len(tables) * h_max * k_max * (9 * 8 + 8 + 8 + 1) > WHOLE_MAX_BYTES:
+    if _whole_bytes(len(tables), h_max, k_max, len(c.camera)) > WHOLE_MAX_BYTES:
         return False, python_s
     return bool(shares[1] + shares[2] >= WHOLE_FROM_SHARE or crowd_s >= WHOLE_LOAD_S), python_s
+
+
+def _whole_bytes(m: int, h_max: int, k_max: int, n: int) -> int:
+    """Bytes the whole-session compiled choice holds for ``m`` cameras of at most ``h_max``
+    frames of at most ``k_max`` candidates, ``n`` candidates in all
+    (:func:`pslog.fusion._gate_kernel.gate_session`): per frame slot the state's ``fi`` (5
+    int64) and ``fflag`` (2 int8); per candidate slot its ``ct`` (int64), ``cf`` (9 float64),
+    ``csup`` (int8) and ``session_state``'s ``rows`` (int64); per candidate the decided ratio
+    returned ((C, m) float64). (Review40: the estimate had the candidate slots alone, 61 %
+    of the bytes of a two-camera session of one candidate a frame.)"""
+    return m * h_max * (5 * 8 + 2) + m * h_max * k_max * (8 + 9 * 8 + 1 + 8) + n * m * 8
 
 
 def _sums_reproduced() -> bool:
@@ -3333,11 +3344,14 @@ _PREGATED_FORM = (True, 0.0)
 _PREGATED_COMMON = "common"
 
 
-def pregated(chosen: Gated, common: tuple) -> dict:
-    """A gating pass made before the fusion (:func:`pslog.fusion.default_methods`' : the
-    causal form without a wait, every choice's doubt made) and the forms' shared part
-    (:func:`gate_common`), as :func:`start_fusion`'s ``gated`` takes them."""
-    return {_PREGATED_FORM: chosen, _PREGATED_COMMON: common}
+def pregated(chosen: Gated, common: tuple, key: tuple = _PREGATED_FORM,
+             doubt: bool | str = True) -> dict:
+    """A gating pass made before the fusion (:func:`pslog.fusion.default_methods`' : by
+    default the causal form without a wait, every choice's doubt made; ``key``: its form,
+    :func:`gating_key`; ``doubt``: the doubt it was made with) and the forms' shared part
+    (:func:`gate_common`), as :func:`start_fusion`'s ``gated`` takes them (a form's pass
+    taken where its methods take that doubt)."""
+    return {key: (chosen, doubt), _PREGATED_COMMON: common}
 
 
 def start_fusion(detections: Detections, rig: Rig, methods, options=None, *,
@@ -3401,9 +3415,10 @@ def start_fusion(detections: Detections, rig: Rig, methods, options=None, *,
             doubting[key] = True if doubting.get(key) is True else METHODS[m].doubt
 
     def gated_input(key, method: str) -> tuple[Gated, Prepared | None]:  # once per form
-        made = given.pop(key, None) if doubting.get(key, False) is True else None
-        if made is not None:  # (the pass before, the same call: see the docstring)
-            gated = made
+        made = given.pop(key, None)
+        if made is not None and made[1] == doubting.get(key, False):
+            # (the pass before, the same call: see the docstring)
+            gated = made[0]
             common()  # (its use of the shared part, counted as each form's is)
         else:
             gated = gate_for(detections, rig, method, options, common,

@@ -14,11 +14,17 @@
 
 Positions are world metres. Times are parsed exactly to the nanosecond (decimal, never
 through float64), so an exported truth read back is the same to the bit. A truth's times
-must increase strictly, every position be finite (a gap: leave its rows out; the truth is
-interpolated linearly between the samples, :meth:`pslog.records.Truth.at`), and it needs two
-samples at least. :func:`truth_for_tracks` puts it on the session clock and refuses a truth
-that shares no time with the tracks (naming both spans), one on the other clock than its
-format's (naming the offset) and one whose positions look like millimetres.
+must increase strictly, and it needs two samples with a position at least; the truth is
+interpolated linearly between the samples (:meth:`pslog.records.Truth.at`). A row whose x, y
+and z are all empty (or all NaN) is a gap, as motion-capture software writes a marker it lost
+(session 40, review40): the truth is NaN there, so the points between the samples around it
+are not scored (``truth_gap``) rather than scored against a straight line across the gap (a
+lost second of a rally: smooth's max error 16 -> 646 mm). Any other position must be finite.
+A CSV is comma-separated, or tab-separated where its name ends ``.tsv`` or its header holds
+tabs and no comma (Qualisys' export). :func:`truth_for_tracks` puts it on the session clock
+and refuses a truth that shares no time with the tracks (naming both spans), one on the
+other clock than its format's (naming the offset) and one whose positions look like
+millimetres.
 """
 
 from __future__ import annotations
@@ -67,7 +73,8 @@ class TruthFile:
     clock : str, ``"original"`` (CSV: the clock of the imported detections, session time +
         the session's clock origin) or ``"session"`` (TUM)
     truth : Truth, n >= 2 samples: time_ns (n,) int64 on that clock, strictly increasing;
-        position_world (n, 3) float64, metres, finite
+        position_world (n, 3) float64, metres, finite but in a gap's rows (all NaN), two
+        rows finite at least
     """
 
     path: Path
@@ -86,8 +93,9 @@ def read_truth_file(path: str | Path) -> TruthFile:
     Raises
     ------
     InputError : a missing or unreadable file, an MCAP session, JSON, a detections CSV, a
-        malformed line (named), times not increasing, a position not finite, fewer than two
-        samples, a tracks CSV of several methods
+        malformed line (named), times not increasing, a position not finite (but a gap's:
+        x, y, z all empty or NaN), fewer than two samples with a position, a tracks CSV of
+        several methods
     """
     path = Path(path)
     check_input_file(path)
@@ -129,10 +137,14 @@ def read_truth_file(path: str | Path) -> TruthFile:
     if tum:
         times, positions, lines = _read_tum(text, path)
     else:
-        times, positions, lines = _read_csv(text, path)
-    if len(times) < 2:
-        raise InputError(f"{path}: {len(times)} sample{'s' if len(times) != 1 else ''}: a "
-                         f"truth needs two at least (it is interpolated between them)")
+        tabs = suffix == ".tsv" or ("\t" in first and "," not in first)
+        times, positions, lines = _read_csv(text, path, "\t" if tabs else ",")
+    n_known = int(np.count_nonzero(np.isfinite(positions).all(axis=1)))
+    if n_known < 2:
+        gaps = len(times) - n_known
+        raise InputError(f"{path}: {n_known} sample{'s' if n_known != 1 else ''}"
+                         f"{f' with a position ({gaps} gap rows)' if gaps else ''}: a truth "
+                         f"needs two at least (it is interpolated between them)")
     step = np.diff(times)
     bad = np.flatnonzero(step <= 0)
     if len(bad):
@@ -166,9 +178,21 @@ def _number(text: str, what: str, path: Path, line: int) -> float:
                   if not np.isfinite(value) else
                   f"beyond any rig's world (at most {MAX_POSITION_M:g} m from the origin)")
         raise InputError(f"{path}: line {line}: {what} {text!r}: {reason}"
-                         + (" (every truth sample needs a position in metres: leave out the "
-                            "rows of times without one)" if "world" not in reason else ""))
+                         + (" (every truth sample needs a position in metres; a gap, a time "
+                            "without one: x, y and z all empty)" if "world" not in reason
+                            else ""))
     return value
+
+
+def _position(cells: list[str], names: list[str], path: Path,
+              line: int) -> tuple[float, float, float]:
+    """A row's x, y, z: NaN where all three are empty or NaN (a gap: a marker the motion
+    capture lost), else each a finite number (:func:`_number`)."""
+    if all(not cell.strip() or cell.strip().lower() == "nan" for cell in cells):
+        return (np.nan, np.nan, np.nan)
+    x, y, z = (_number(cell, f"{name} value", path, line)
+               for cell, name in zip(cells, names, strict=True))
+    return (x, y, z)
 
 
 def _seconds(text: str, path: Path, line: int) -> int:
@@ -183,12 +207,9 @@ def _seconds(text: str, path: Path, line: int) -> int:
     raise InputError(f"{path}: line {line}: time {text.strip()!r}: {reason}")
 
 
-def _read_csv(text: str, path: Path) -> tuple[np.ndarray, np.ndarray, list[int]]:
-    # (tab-separated, a .tsv or a spreadsheet's "text, tab delimited": a header of tabs and
-    # no comma)
-    head = text.lstrip("\r\n").partition("\n")[0]
-    tabs = "\t" in head and "," not in head
-    reader = csv.reader(io.StringIO(text, newline=""), delimiter="\t" if tabs else ",")
+def _read_csv(text: str, path: Path,
+              delimiter: str = ",") -> tuple[np.ndarray, np.ndarray, list[int]]:
+    reader = csv.reader(io.StringIO(text, newline=""), delimiter=delimiter)
     try:
         header = [h.strip() for h in next(reader)]
     except csv.Error as exc:
@@ -223,8 +244,8 @@ def _read_csv(text: str, path: Path) -> tuple[np.ndarray, np.ndarray, list[int]]
             if method_col is not None:
                 methods.setdefault(row[method_col].strip(), line)
             times.append(_seconds(row[time_col], path, line))
-            positions.append(tuple(_number(row[c], f"{header[c]} value", path, line)
-                                   for c in cols))
+            positions.append(_position([row[c] for c in cols], [header[c] for c in cols],
+                                       path, line))
             lines.append(line)
     except csv.Error as exc:
         raise InputError(f"{path}: line {reader.line_num}: {exc}") from None
@@ -257,8 +278,7 @@ def _read_tum(text: str, path: Path) -> tuple[np.ndarray, np.ndarray, list[int]]
                              f"'timestamp tx ty tz qx qy qz qw' (or its first four), "
                              f"separated by spaces")
         times.append(_seconds(fields[0], path, line))
-        positions.append(tuple(_number(fields[k], f"t{'xyz'[k - 1]} value", path, line)
-                               for k in (1, 2, 3)))
+        positions.append(_position(fields[1:4], ["tx", "ty", "tz"], path, line))
         lines.append(line)
     return (np.asarray(times, np.int64), np.asarray(positions, np.float64).reshape(-1, 3),
             lines)
@@ -305,7 +325,27 @@ def truth_for_tracks(read: TruthFile, tracks: Sequence[Track], origin_ns: int = 
                  else "the session clock")
         other = origin_ns if shift else -origin_ns  # (the times read on the other clock)
         if origin_ns and not any(met) and any(meets(first + other, last + other)):
-            raise _other_clock(read, origin_ns)
+            # (times counted from the truth's own start, a mocap's, meet the session
+            # clock's span too: adding the origin then put them 0.437 s off, in silence;
+            # walk40)
+            lo = min(s[1] for s in spans) + origin_ns
+            hi = max(s[2] for s in spans) + origin_ns
+            own = (f"; times counted from the truth's own start (a motion-capture "
+                   f"system's clock) are on neither clock: put them on the cameras' (the "
+                   f"tracks span {_span(lo, hi)} on the original clock) first")
+            if shift:
+                raise InputError(
+                    f"{read.path}: its times ({_span(int(t[0]), int(t[-1]))}) span the "
+                    f"session clock's, but a CSV truth's are on the original clock, as 'pslog "
+                    f"export --csv' writes them: if they are session times, add the session's "
+                    f"clock origin {format_time(origin_ns)} s to every time (or give the truth "
+                    f"as a TUM file, on the session clock){own}")
+            raise InputError(
+                f"{read.path}: its times ({_span(int(t[0]), int(t[-1]))}) are on the "
+                f"original clock, but a TUM truth's are on the session clock, as 'pslog "
+                f"export --tum' writes them: subtract the session's clock origin "
+                f"{format_time(origin_ns)} s from every time (or give the truth as a CSV "
+                f"t,x,y,z, on the original clock)")
         if any(met):  # (one track outside the truth's span, the others not)
             method, lo, hi = next(s for s, m in zip(spans, met, strict=True) if not m)
             whose = f"track {method}: the truth spans {_span(int(t[0]), int(t[-1]))}, the track"
@@ -316,7 +356,9 @@ def truth_for_tracks(read: TruthFile, tracks: Sequence[Track], origin_ns: int = 
                          f"{_span(lo + shift, hi + shift)}, both on {clock}; nothing to score")
     if spans:
         _check_seconds(read, tracks, spans)
-        truth_norm = float(np.median(np.linalg.norm(read.truth.position_world, axis=1)))
+        known = read.truth.position_world
+        known = known[np.isfinite(known).all(axis=1)]  # (a gap's NaN rows left out)
+        truth_norm = float(np.median(np.linalg.norm(known, axis=1)))
         points = np.concatenate([track.position_world for track in tracks])
         points = points[np.isfinite(points).all(axis=1)]
         track_norm = float(np.median(np.linalg.norm(points, axis=1))) if len(points) else 0.0
@@ -415,6 +457,111 @@ def describe(read: TruthFile, truth: Truth, origin_ns: int = 0) -> str:
     clock = ("TUM, session clock" if read.clock == "session" else
              f"CSV, original clock: session time + {format_time(origin_ns)} s" if origin_ns
              else "CSV, original clock = session clock")
+    gaps = int(np.count_nonzero(~np.isfinite(read.truth.position_world).all(axis=1)))
     return (f"truth: {read.path} ({clock}): {len(t)} samples, {_span(int(t[0]), int(t[-1]))}, "
             f"steps median {float(np.median(step)):.3g} ms, largest {float(step.max()):.3g} "
-            f"ms (interpolated linearly between samples)")
+            f"ms (interpolated linearly between samples"
+            + (f"; {gaps} gap rows: the points between the samples around them not scored"
+               if gaps else "") + ")")
+
+
+#: :func:`truth_clock_shift` searches the truth's clock offset within ±this many seconds, on
+#: a grid of :data:`_SHIFT_COARSE_S`, then around the best within one step, on a grid of
+#: :data:`_SHIFT_FINE_S`.
+SHIFT_SEARCH_S = 1.0
+_SHIFT_COARSE_S = 2e-3
+_SHIFT_FINE_S = 0.05e-3
+#: The shift is said when it is at least this (seconds) and lowers the median error by at
+#: least this share: a truth on the cameras' clock finds its best within a fraction of a
+#: millisecond (the tracks' own timing errors), below both.
+SHIFT_NOTE_S = 1e-3
+#: The search scores at most this many of the track's points, evenly spread.
+_SHIFT_POINTS = 1000
+SHIFT_NOTE_GAIN = 0.2
+
+
+@dataclass(frozen=True)
+class TruthShift:
+    """The time shift of a truth that best fits a track (:func:`truth_clock_shift`).
+
+    Attributes
+    ----------
+    method : str, the track it was measured on (the most accurate as given)
+    shift_s : float, seconds to add to the truth's times for the smallest median error
+    median_mm : float, the track's median error with the truth shifted so
+    median_given_mm : float, its median error with the truth as given
+    """
+
+    method: str
+    shift_s: float
+    median_mm: float
+    median_given_mm: float
+
+    @property
+    def notable(self) -> bool:
+        """A shift a truth on the cameras' clock would not show: said by ``pslog eval``."""
+        return (abs(self.shift_s) >= SHIFT_NOTE_S
+                and self.median_mm <= (1.0 - SHIFT_NOTE_GAIN) * self.median_given_mm)
+
+
+def _median_errors(truth: Truth, time_s: np.ndarray, points: np.ndarray,
+                   shifts: np.ndarray) -> np.ndarray:
+    """Median distance (m) of ``points`` at ``time_s`` (seconds, relative to the truth's
+    first sample) from the truth with its times moved by each of ``shifts`` (seconds);
+    NaN where fewer than half the points fall inside the moved truth's span."""
+    t_truth = (truth.time_ns - truth.time_ns[0]) / NS
+    out = np.full(len(shifts), np.nan)
+    for i, d in enumerate(shifts):
+        t = time_s - d  # the moved truth at t is the given one at t - d
+        inside = (t >= t_truth[0]) & (t <= t_truth[-1])
+        if np.count_nonzero(inside) * 2 < len(t):
+            continue
+        ti = t[inside]
+        at = np.stack([np.interp(ti, t_truth, truth.position_world[:, k]) for k in range(3)],
+                      axis=1)
+        out[i] = float(np.median(np.linalg.norm(points[inside] - at, axis=1)))
+    return out
+
+
+def truth_clock_shift(truth: Truth, tracks: Sequence[Track]) -> TruthShift | None:
+    """How far the truth's clock seems off the tracks': the time shift of the truth (within
+    ±:data:`SHIFT_SEARCH_S`) that gives a track its smallest median error, on the track
+    whose smallest median is the smallest of all; None: no track with 10 finite points in
+    the truth's span.
+
+    A motion-capture truth on a clock of its own (another host's Unix time, a few ms off the
+    first camera's; a clock counted from the capture's start) moves every error by the
+    ball's speed times the offset: 4 ms at 5 m/s is 2 cm, which ``pslog eval`` would
+    charge to the fusion (walk40). The median of the distances is robust to a track's few
+    false points; the track best at its own shift, not the best as given (a method lagging
+    the ball looked best against a late truth and put the shift 0.5 ms off). Not a
+    correction: ``pslog eval`` says it (:attr:`TruthShift.notable`) and scores the truth as
+    given.
+    """
+    coarse = np.arange(-SHIFT_SEARCH_S, SHIFT_SEARCH_S + _SHIFT_COARSE_S / 2, _SHIFT_COARSE_S)
+    best = None
+    for track in tracks:
+        ok = np.flatnonzero(np.isfinite(track.position_world).all(axis=1))
+        given = truth.at(track.time_ns[ok])
+        inside = np.isfinite(given).all(axis=1)
+        if np.count_nonzero(inside) < 10:
+            continue
+        med0 = float(np.median(np.linalg.norm(track.position_world[ok][inside]
+                                              - given[inside], axis=1)))
+        if len(ok) > _SHIFT_POINTS:  # (evenly over the track: a 90-minute match in ~0.2 s)
+            ok = ok[np.linspace(0, len(ok) - 1, _SHIFT_POINTS).round().astype(np.int64)]
+        time_s = (track.time_ns[ok] - truth.time_ns[0]) / NS
+        points = track.position_world[ok]
+        errors = _median_errors(truth, time_s, points, coarse)
+        if not np.isfinite(errors).any():
+            continue
+        i = int(np.nanargmin(errors))
+        if best is None or errors[i] < best[0]:
+            best = (float(errors[i]), coarse[i], track, time_s, points, med0)
+    if best is None:
+        return None
+    _, d0, track, time_s, points, med0 = best
+    fine = d0 + np.arange(-_SHIFT_COARSE_S, _SHIFT_COARSE_S + _SHIFT_FINE_S / 2, _SHIFT_FINE_S)
+    errors = _median_errors(truth, time_s, points, fine)
+    i = int(np.nanargmin(errors))
+    return TruthShift(track.method, float(fine[i]), float(errors[i]) * 1e3, med0 * 1e3)

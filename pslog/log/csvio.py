@@ -13,8 +13,9 @@ Detections CSV (import and export use exactly this format)::
 - Rows may come in any order. Rows with the same camera and time are the candidates of one
   frame (they must agree on ``frame``); one camera's frame index cannot appear at two
   different times. A candidate given twice (camera, time, u, v equal: a file appended to
-  itself) is refused. Without a ``frame`` column, each camera's frames are
-  numbered 0, 1, 2, ... in time order.
+  itself) is refused. Without a ``frame`` column, each camera's frames are numbered
+  from their times: 0 first, and each step the frame periods it spans (a frame without a
+  row, a miss the detector did not write, leaves a gap: :func:`_frames_from_times`).
 - A frame without any candidate (the ball missed) is one row with ``u`` and ``v`` empty
   (``cam1,0.011111111,,,1,``): a frame, no candidate.
 - One CSV per camera (:func:`read_camera_csvs`, ``pslog import --detections NAME=FILE``):
@@ -80,7 +81,10 @@ def _time_ns(text: str) -> int:
         raise _Invalid("not a finite number of seconds")
     # compare before scaling: a huge exponent would overflow the decimal context
     if value.copy_abs() > _MAX_TIME_S:  # copy_abs: exact, no context
-        raise _Invalid(f"beyond the range of times (±{float(_MAX_TIME_S):.3g} s)")
+        # (a Unix time in ms, 1.76e12, or µs: walk40's mocap was refused without a hint)
+        unit = ("; a Unix time in milliseconds or microseconds? give seconds"
+                if value.copy_abs() < _MAX_TIME_S * 10**6 else "")
+        raise _Invalid(f"beyond the range of times (±{float(_MAX_TIME_S):.3g} s){unit}")
     # exact: the decimal context has 28 digits, an int64 of nanoseconds at most 19
     ns = int((value * NS).to_integral_value(rounding=ROUND_HALF_EVEN))
     if not -(2**63) < ns < 2**63:
@@ -162,7 +166,8 @@ def session_clock(detections: Detections) -> tuple[Detections, int]:
     return shifted, origin
 
 
-def read_detections_csv(path, rig: Rig, camera: str | None = None) -> Detections:
+def read_detections_csv(path, rig: Rig, camera: str | None = None,
+                        empty: bool = False) -> Detections:
     """Parse a detections CSV (format in the module docstring) against ``rig``'s cameras.
 
     Times are the CSV's own (int64 ns, any sign); :func:`session_clock` puts them on a
@@ -176,6 +181,8 @@ def read_detections_csv(path, rig: Rig, camera: str | None = None) -> Detections
         of ``rig``: the file holds that camera's rows alone (one CSV per camera,
         ``pslog import --detections NAME=FILE``): header ``time,u,v[,frame][,score]``, a
         ``camera`` column optional, and where there every row must name ``camera``
+    empty : a file of no rows (its header alone) is read as no frames, not refused
+        (:func:`read_camera_csvs`: a camera that saw nothing)
 
     Raises InputError naming the line (and column) of the first malformed row or unknown
     camera (or, with ``camera``, a row naming another).
@@ -295,7 +302,8 @@ def read_detections_csv(path, rig: Rig, camera: str | None = None) -> Detections
                                  np.asarray(uv, np.float64).reshape(-1, 2),
                                  np.asarray(frames, np.int64) if has_frame else None,
                                  np.asarray(scores, np.float64) if has_score else None, path,
-                                 np.asarray(lines, np.int64), np.asarray(missed, bool))
+                                 np.asarray(lines, np.int64), np.asarray(missed, bool),
+                                 empty=empty)
 
 
 def _head(path: Path) -> bytes:
@@ -325,9 +333,16 @@ def read_camera_csvs(files, rig: Rig) -> Detections:
     files : mapping camera name -> CSV path, each camera once (any order)
     rig : the rig the names are cameras of
 
+    A file of no rows (its header alone: a camera that saw nothing) gives that camera no
+    frames, as the joined CSV would hold none of its rows (review40: it was refused, the
+    other cameras' rows with it); every file without rows is refused, naming them.
+
     Raises InputError as :func:`read_detections_csv`, naming the file and line.
     """
-    parts = [read_detections_csv(path, rig, camera=name) for name, path in files.items()]
+    parts = [read_detections_csv(path, rig, camera=name, empty=True)
+             for name, path in files.items()]
+    if all(d.n_frames == 0 for d in parts):
+        raise InputError(f"{', '.join(map(str, files.values()))}: no detection rows")
     offsets = np.cumsum([0, *(d.n_frames for d in parts)])[:-1]
     return Detections.from_frames(
         rig.names, np.concatenate([d.frame_time_ns for d in parts]),
@@ -340,13 +355,18 @@ def read_camera_csvs(files, rig: Rig) -> Detections:
 
 
 def _detections_from_rows(rig: Rig, cams, times, uv, frames, scores, path,
-                          lines, missed=None) -> Detections:
+                          lines, missed=None, empty: bool = False) -> Detections:
     """Group candidate rows into frames: one frame per distinct (camera, time).
 
     ``lines`` (n,) int64 are the rows' line numbers in the file, for error messages;
-    ``missed`` (n,) bool marks rows that stand for a frame without a candidate.
+    ``missed`` (n,) bool marks rows that stand for a frame without a candidate; ``empty``:
+    no rows give no frames (else refused).
     """
     n = len(cams)
+    if n == 0 and empty:
+        return Detections.from_frames(rig.names, np.zeros(0, np.int64), np.zeros(0, np.int32),
+                                      np.zeros(0, np.int64), np.zeros(0, np.int64),
+                                      np.zeros((0, 2)))
     if n == 0:
         raise InputError(f"{path}: no detection rows")
     keys = np.stack([cams.astype(np.int64), times], axis=1)
@@ -369,9 +389,7 @@ def _detections_from_rows(rig: Rig, cams, times, uv, frames, scores, path,
         _check_one_time_per_frame(rig, frame_camera, frame_index, frame_time, cand_frame,
                                   lines, path)
     else:
-        # np.unique sorts by (camera, time): rank within each camera is the frame number
-        starts = np.searchsorted(frame_camera, frame_camera, side="left")
-        frame_index = np.arange(len(unique)) - starts
+        frame_index = _frames_from_times(rig, frame_camera, frame_time)
     _check_no_repeated_candidate(rig, cams, times, uv, lines, path, missed, cand_frame)
     _check_seconds(rig, frame_camera, frame_index, frame_time, path)
     if missed is not None and missed.any():  # frames, not candidates
@@ -380,6 +398,46 @@ def _detections_from_rows(rig: Rig, cams, times, uv, frames, scores, path,
         scores = None if scores is None else scores[keep]
     return Detections.from_frames(rig.names, frame_time, frame_camera, frame_index, cand_frame,
                                   uv, None, scores)
+
+
+#: Without a ``frame`` column, a step between a camera's frames counts as ``m`` frame periods
+#: of the median step (not one) when the median is within this share of ``m`` rig periods,
+#: ``m`` 2 to :data:`_MAX_MEDIAN_PERIODS`: a camera that saw the ball in fewer than half its
+#: frames, whose median step is then two or more periods.
+_PERIOD_TOLERANCE = 0.1
+_MAX_MEDIAN_PERIODS = 4
+
+
+def _frames_from_times(rig: Rig, frame_camera, frame_time) -> np.ndarray:
+    """Each camera's frame numbers from its frames' times (a CSV without a ``frame``
+    column): the first frame 0, and each step between consecutive frames the number of
+    frame periods it spans, rounded (at least 1), the period being the camera's median step
+    (its measured frame period, the rig's ``fps`` only where the median spans several
+    periods: :data:`_PERIOD_TOLERANCE`). A detector that writes no row for a frame without
+    a ball so leaves a gap in the numbers, as a ``frame`` column would: numbered 0, 1, 2, ...
+    (before session 40) a session's misses shifted every later frame's number, and ``pslog
+    sync``'s line of host stamps against frame numbers (``--regularize``) then moved every
+    time by up to seconds (walk40: 5 % misses, offsets 46-47 ms off, points 12 cm off).
+
+    ``frame_camera``, ``frame_time`` (n,) sorted by (camera, time), times distinct within
+    a camera. Returns ``frame_index`` (n,) int64.
+    """
+    frame_index = np.zeros(len(frame_time), dtype=np.int64)
+    for c, camera in enumerate(rig.cameras):
+        rows = np.flatnonzero(frame_camera == c)
+        if len(rows) < 2:
+            continue
+        steps = np.diff(frame_time[rows]).astype(np.float64)  # ns, > 0
+        period = float(np.median(steps))
+        ratio = period / (camera.frame_period * NS)
+        m = round(ratio)
+        if 2 <= m <= _MAX_MEDIAN_PERIODS and abs(ratio / m - 1.0) <= _PERIOD_TOLERANCE:
+            period /= m
+        counts = np.maximum(np.rint(np.minimum(steps / period, MAX_FRAME_INDEX)), 1)
+        if counts.sum() > MAX_FRAME_INDEX:  # (times no frame counter spans: in time order)
+            counts = np.ones(len(steps))
+        frame_index[rows] = np.concatenate(([0], np.cumsum(counts.astype(np.int64))))
+    return frame_index
 
 
 #: A camera whose frames lie this many frame periods apart (median) holds times in another
