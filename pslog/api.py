@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
-from .errors import FusionError, InputError
+from .errors import FusionError, InputError, shown
 from .records import NS, Detections, Observations, Track, Truth
 
 if TYPE_CHECKING:  # the heavy modules load when first called, not at `import pslog`
@@ -58,7 +58,7 @@ def read_session(path: str | os.PathLike[str]) -> Session:
     from .log import read_session as _read
 
     if not isinstance(path, (str, os.PathLike)):  # (a TypeError from deep inside, before)
-        raise InputError(f"read_session: path {path!r:.60}: give a file name (str or Path)")
+        raise InputError(f"read_session: path {shown(path)}: give a file name (str or Path)")
     return _read(path)
 
 
@@ -167,12 +167,12 @@ def fuse(session: Session | str | os.PathLike[str] | Detections,
     names = _names(methods, "methods")
     # (each an AttributeError from inside before; clock_uncertainty="off" was taken as on)
     if rig is not None and not isinstance(rig, (Rig, str, os.PathLike)):
-        raise InputError(f"rig {rig!r:.60}: give a Rig, a built-in rig's name or a rig file")
+        raise InputError(f"rig {shown(rig)}: give a Rig, a built-in rig's name or a rig file")
     if options is not None and not isinstance(options, FusionOptions):
-        raise InputError(f"options {options!r:.60}: give a pslog.fusion.FusionOptions")
+        raise InputError(f"options {shown(options)}: give a pslog.fusion.FusionOptions")
     # (numpy's bools too, np.True_: a flag taken from an array)
     if not isinstance(clock_uncertainty, (bool, np.bool_)):
-        raise InputError(f"clock_uncertainty {clock_uncertainty!r:.60}: give True or False")
+        raise InputError(f"clock_uncertainty {shown(clock_uncertainty)}: give True or False")
     clock_uncertainty = bool(clock_uncertainty)
     if isinstance(session, Detections):
         if rig is None:
@@ -403,6 +403,11 @@ def sync(session: Session | str | os.PathLike[str],
                 gated_note += " (the coarse offset scan: " + "; ".join(coarse_notes) + ")"
     if gated_note:
         notes.append(gated_note)
+    if len(obs) == 0 and detections.n_candidates:  # (the gating rejected every one)
+        raise FusionError(f"{read.path}: all {detections.n_candidates} candidates rejected "
+                          f"by gating, no frame's ball passed its epipolar and motion tests "
+                          f"(frames too crowded to tell the ball, or clocks further apart "
+                          f"than they allow): nothing to sync on")
     if len(obs) == 0:
         raise FusionError(f"{read.path} has no detection: nothing to sync on")
     # auto's drift test on the ball's observations' span, as select_clocks decides it (the
@@ -636,17 +641,17 @@ def evaluate(tracks: Track | Mapping[str, Track] | Session,
     if isinstance(tracks, Track):
         tracks = {tracks.method: tracks}
     if truth is not None and not isinstance(truth, Truth):
-        raise InputError(f"evaluate: truth {truth!r:.60}: give a Truth (e.g. session.truth)")
+        raise InputError(f"evaluate: truth {shown(truth)}: give a Truth (e.g. session.truth)")
     if truth is None or len(truth) == 0:
         raise InputError("evaluate: no ground truth (only sessions of 'pslog simulate', 'pslog "
                          "record --synthetic' and 'pslog demo' have one)")
     if not isinstance(tracks, Mapping):
-        raise InputError(f"evaluate: tracks {tracks!r:.60}: give a Track, a mapping of "
+        raise InputError(f"evaluate: tracks {shown(tracks)}: give a Track, a mapping of "
                          f"method -> Track or a Session")
     if not tracks:
         raise InputError("evaluate: no track to evaluate")
     bad = {k: v for k, v in tracks.items() if not isinstance(v, Track)}
     if bad:
         key, value = next(iter(bad.items()))
-        raise InputError(f"evaluate: tracks[{key!r}] is {value!r:.60}, not a Track")
+        raise InputError(f"evaluate: tracks[{key!r}] is {shown(value)}, not a Track")
     return {method: _evaluate(track, truth) for method, track in tracks.items()}

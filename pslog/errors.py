@@ -30,6 +30,12 @@ class OutputExistsError(PslogError):
     """An output file exists and ``--force`` was not given."""
 
 
+def shown(value: object, limit: int = 60) -> str:
+    """``repr(value)`` for a one-line message: its whitespace runs (a numpy array's repr spans
+    lines) made single spaces, cut to ``limit`` characters."""
+    return " ".join(repr(value).split())[:limit]
+
+
 _PLAIN = frozenset("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789@%+=:,./-_")
 
 

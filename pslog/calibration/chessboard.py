@@ -18,7 +18,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from ..errors import InputError, PslogError
+from ..errors import InputError, PslogError, shown
 from ._common import (
     IMAGE_SUFFIXES,
     MIN_CHESSBOARD_VIEWS,
@@ -52,11 +52,11 @@ def check_pattern(pattern: object, text: object = None) -> tuple[int, int]:
              else ())
     if len(sides) != 2 or not all(isinstance(p, (int, np.integer)) and not isinstance(p, bool)
                                   for p in sides):
-        raise InputError(f"bad chessboard pattern {spelled!r}: expected COLSxROWS of inner "
-                         f"corners, e.g. 9x6")
+        raise InputError(f"bad chessboard pattern {shown(spelled, 80)}: expected COLSxROWS of "
+                         f"inner corners, e.g. 9x6")
     cols, rows = int(sides[0]), int(sides[1])
     if not (MIN_PATTERN_SIDE <= min(cols, rows) and max(cols, rows) <= MAX_PATTERN_SIDE):
-        raise InputError(f"bad chessboard pattern {spelled!r}: each side needs "
+        raise InputError(f"bad chessboard pattern {shown(spelled, 80)}: each side needs "
                          f"{MIN_PATTERN_SIDE} to {MAX_PATTERN_SIDE} inner corners")
     return cols, rows
 

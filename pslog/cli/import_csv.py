@@ -128,8 +128,16 @@ def _named_files(values: list[str], rig) -> dict[str, str] | int:
 
     from ._common import usage_error
 
+    def split(value: str) -> tuple[str, str, str]:
+        # (a rig camera's name may hold '=' itself: the longest name the value starts with)
+        own = [n for n in rig.names if value.startswith(n + "=")]
+        if own:
+            name = max(own, key=len)
+            return name, "=", value[len(name) + 1:]
+        return value.partition("=")
+
     def camera_of(value: str) -> str | None:
-        name, sep, _path = value.partition("=")
+        name, sep, _path = split(value)
         if not sep or (name not in rig.names and len(values) == 1 and os.path.exists(value)):
             return None  # (a file named with an '=' given alone: taken whole)
         return name
@@ -139,13 +147,19 @@ def _named_files(values: list[str], rig) -> dict[str, str] | int:
         return {}
     named: dict[str, str] = {}
     for value, name in zip(values, names, strict=True):
-        path = value.partition("=")[2]
+        path = split(value)[2]
         if name is None or name not in rig.names:
             return usage_error("import", f"argument --detections {value}: no camera "
                                          f"{name!r} in the rig (it has {', '.join(rig.names)}); "
                                          f"give CAMERA=FILE, the rig's name for the camera")
         if not path.strip():
             return usage_error("import", f"argument --detections {value}: empty file name")
+        if not os.path.lexists(path) and os.path.lexists(value):
+            # (a file of every camera's rows named cam1=...: 'no such file: x.csv' said not
+            # which file was meant)
+            return usage_error("import", f"argument --detections {value}: read as camera "
+                                         f"{name}'s file {path}, which does not exist; for the "
+                                         f"file {value} itself give ./{value}")
         if name in named:
             return usage_error("import", f"argument --detections: camera {name} given twice "
                                          f"({named[name]}, {path})")

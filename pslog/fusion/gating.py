@@ -512,41 +512,22 @@ def _support(c: _Candidates, rig: Rig, F: np.ndarray, tables, options: GatingOpt
                 ok &= np.abs(t - times[np.maximum(second, 0)]) <= max_gap_ns
                 if extrapolate:  # only where no interpolation was possible
                     ok &= inext < 0
-                idx = np.flatnonzero(ok)
-                if len(idx) == 0:
-                    continue
-                near[idx] = True
-                r0 = table[first[idx]]  # (k, K)
-                r1 = table[second[idx]]
-                valid = (r0[:, :, None] >= 0) & (r1[:, None, :] >= 0)
-                y0 = c.uv_und[np.maximum(r0, 0)][:, :, None, :]
-                y1 = c.uv_und[np.maximum(r1, 0)][:, None, :, :]
-                t0 = c.time_ns[np.maximum(r0, 0)][:, :, None]
-                t1 = c.time_ns[np.maximum(r1, 0)][:, None, :]
-                span = (t1 - t0) / NS
-                tt = t[idx][:, None, None]
-                with np.errstate(invalid="ignore", divide="ignore"):
-                    w = np.where(span != 0, (tt - t0) / NS / np.where(span != 0, span, 1), 0.0)
-                    y = y0 + w[..., None] * (y1 - y0)
-                    speed = np.linalg.norm(y1 - y0, axis=-1) / np.abs(span)
-                valid &= (span > 0) & (speed <= vmax)
-                tau = options.epipolar_px + 0.5 * accel * np.abs(tt - t0) / NS * np.abs(
-                    tt - t1) / NS
-                ln = lines[idx][:, None, None, :]
-                d = np.abs(ln[..., 0] * y[..., 0] + ln[..., 1] * y[..., 1] + ln[..., 2])
-                r = np.where(valid & np.isfinite(d), d / tau, np.inf).reshape(len(idx), -1)
-                k = np.argmin(r, axis=1)
-                rk = r[np.arange(len(idx)), k]
-                better = rk < best[idx]
-                best[idx[better]] = rk[better]
-                best_uv[idx[better]] = y.reshape(len(idx), -1, 2)[np.arange(len(idx)), k][better]
+                near[ok] = True
+                # (in blocks of candidates: each holds K² pairs, K the most candidates a
+                # frame has, which a crowded session makes many: 50 a frame held GBs)
+                every = np.flatnonzero(ok)
+                block = max(1, _SUPPORT_PAIRS // max(1, table.shape[1] ** 2))
+                for idx in (every[k:k + block] for k in range(0, len(every), block)):
+                    _support_pairs(idx, first, second, table, t, c, lines, best, best_uv,
+                                   vmax, accel, options)
             # a single nearby frame (the other camera missed the one before): its candidates
             # as they are, allowing the image motion a ball can make since
             single = ~near & (i1 >= 0)
             single &= np.abs(t - times[np.maximum(i1, 0)]) <= max_gap_ns
-            idx = np.flatnonzero(single)
-            if len(idx):
-                near[idx] = True
+            every = np.flatnonzero(single)
+            near[every] = True
+            block = max(1, _SUPPORT_PAIRS // max(1, table.shape[1]))
+            for idx in (every[k:k + block] for k in range(0, len(every), block)):
                 r1 = table[i1[idx]]
                 y = c.uv_und[np.maximum(r1, 0)]
                 dt = np.abs(t[idx][:, None] - c.time_ns[np.maximum(r1, 0)]) / NS
@@ -560,6 +541,41 @@ def _support(c: _Candidates, rig: Rig, F: np.ndarray, tables, options: GatingOpt
             ratio[rows[near], b] = best[near]
             carried[rows, b] = best_uv
     return ratio, carried, used
+
+
+#: candidate pairs :func:`_support`'s numpy form holds at once (a block of candidates, each
+#: with K² pairs of another camera's two frames; ~100 bytes a pair)
+_SUPPORT_PAIRS = 1 << 20
+
+
+def _support_pairs(idx, first, second, table, t, c: _Candidates, lines, best, best_uv, vmax,
+                   accel, options: GatingOptions) -> None:
+    """:func:`_support`'s interpolation (or extrapolation) between camera b's frames
+    ``first[idx]`` and ``second[idx]`` for the candidates ``idx`` of camera a: lowers
+    ``best[idx]`` to each one's best ratio, ``best_uv[idx]`` to that pair's carried pixel."""
+    r0 = table[first[idx]]  # (k, K)
+    r1 = table[second[idx]]
+    valid = (r0[:, :, None] >= 0) & (r1[:, None, :] >= 0)
+    y0 = c.uv_und[np.maximum(r0, 0)][:, :, None, :]
+    y1 = c.uv_und[np.maximum(r1, 0)][:, None, :, :]
+    t0 = c.time_ns[np.maximum(r0, 0)][:, :, None]
+    t1 = c.time_ns[np.maximum(r1, 0)][:, None, :]
+    span = (t1 - t0) / NS
+    tt = t[idx][:, None, None]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        w = np.where(span != 0, (tt - t0) / NS / np.where(span != 0, span, 1), 0.0)
+        y = y0 + w[..., None] * (y1 - y0)
+        speed = np.linalg.norm(y1 - y0, axis=-1) / np.abs(span)
+    valid &= (span > 0) & (speed <= vmax)
+    tau = options.epipolar_px + 0.5 * accel * np.abs(tt - t0) / NS * np.abs(tt - t1) / NS
+    ln = lines[idx][:, None, None, :]
+    d = np.abs(ln[..., 0] * y[..., 0] + ln[..., 1] * y[..., 1] + ln[..., 2])
+    r = np.where(valid & np.isfinite(d), d / tau, np.inf).reshape(len(idx), -1)
+    k = np.argmin(r, axis=1)
+    rk = r[np.arange(len(idx)), k]
+    better = rk < best[idx]
+    best[idx[better]] = rk[better]
+    best_uv[idx[better]] = y.reshape(len(idx), -1, 2)[np.arange(len(idx)), k][better]
 
 
 def _support_one(t: int, line, keys: list[int], usable, search, wait_ns: int, causal: bool,
@@ -1614,6 +1630,7 @@ def gate(detections: Detections, rig: Rig, *, causal: bool = True, wait_s: float
 
     options = options or GatingOptions()
     max_gap_ns = round((max_gap_s or default_max_gap_s(rig)) * NS)
+    check_crowding(detections, rig)
     c, tables = common() if common is not None else gate_common(detections, rig)
     n = len(c.camera)
     reason = np.full(n, -1, dtype=np.int8)
@@ -1621,6 +1638,34 @@ def gate(detections: Detections, rig: Rig, *, causal: bool = True, wait_s: float
         return _result(detections, rig, reason)
     _decided(c, rig, options, causal, round(wait_s * NS), max_gap_ns, reason, tables)
     return _result(detections, rig, reason, options, doubt)
+
+
+#: most candidates a frame may hold for the gate (:func:`check_crowding`): it pairs each
+#: candidate with every pair of another camera's frames around it, work that grows as the
+#: square of a frame's candidates (hostile40, a rally of 8 s, one camera's frames of 1001
+#: and 2001 candidates: 8.5 and 32.5 CPU s a pass; 20,834, 5 million in all, about an hour).
+#: Detectors keep far fewer (``pslog record`` 5 by default, ``redetect`` at most 100).
+MAX_FRAME_CANDIDATES = 1000
+
+
+def check_crowding(detections: Detections, rig: Rig) -> None:
+    """FusionError naming the first frame of the most candidates if it holds more than
+    :data:`MAX_FRAME_CANDIDATES` (an imported CSV takes any number): gating it would take
+    hours and look hung."""
+    if detections.n_candidates == 0:
+        return
+    counts = np.bincount(detections.cand_frame, minlength=detections.n_frames)
+    f = int(np.argmax(counts))
+    if counts[f] > MAX_FRAME_CANDIDATES:
+        from ..log.csvio import format_time
+
+        raise FusionError(
+            f"camera {rig.names[int(detections.frame_camera[f])]}'s frame "
+            f"{int(detections.frame_index[f])} (t = {format_time(int(detections.frame_time_ns[f]))}"
+            f" s) holds {int(counts[f])} candidates: the gate takes at most "
+            f"{MAX_FRAME_CANDIDATES} a frame (its work grows as their square: hours); keep "
+            f"each frame's best {MAX_FRAME_CANDIDATES} or fewer by score (or 'pslog fuse "
+            f"--gating off': each frame's best-scored candidate alone)")
 
 
 def gate_common(detections: Detections, rig: Rig) -> tuple:
@@ -1697,6 +1742,11 @@ WHOLE_MAX_BYTES = 1 << 30
 #: candidate that two other cameras support (taken in arrays), one candidate otherwise,
 #: several candidates
 _PYTHON_S = (1.1e-6, 12e-6, 150e-6)
+#: the Python path's cost per candidate and candidate pair of its crowdest frames, s
+#: (:func:`_decide_compiled`: candidates × k_max², k_max the most candidates a frame holds;
+#: hostile40, 720 frames of a rally: 10, 20, 50 candidates a frame 0.53, 2.0, 30 CPU s and
+#: 78 MB, 286 MB, 3.3 GB; the compiled kernels 0.3-1.3 s)
+_PYTHON_PAIR_S = 3.4e-7
 #: frames :func:`_decide_compiled` looks at, at most (evenly spaced: a share's estimate)
 _WHOLE_SAMPLE = 20_000
 
@@ -1715,7 +1765,11 @@ def _decide_compiled(c: _Candidates, starts: np.ndarray, ends: np.ndarray, table
     rig), ~150 µs one of several (a static object, blobs) (:data:`_PYTHON_S`). So the
     compiled kernels wherever at least :data:`WHOLE_FROM_SHARE` of the frames are not of the
     first kind (judged by the frames' times alone: one candidate, and a frame of two other
-    cameras within the gate's gap; on up to :data:`_WHOLE_SAMPLE` evenly spaced frames), and
+    cameras within the gate's gap; on up to :data:`_WHOLE_SAMPLE` evenly spaced frames), or
+    where crowded frames would cost the Python path :data:`WHOLE_LOAD_S` or more (its
+    support pairs each candidate with every pair of another camera's frames around it:
+    :data:`_PYTHON_PAIR_S` a candidate and pair of the crowdest frame's candidates; 50
+    candidates a frame took 30 s and 3.3 GB there, 209 in one camera asked for 16 GiB), and
     the state holding every frame stays below :data:`WHOLE_MAX_BYTES`. Imports nothing (the
     caller loads the kernels only where they are worth it)."""
     n_frames = len(starts)
@@ -1739,14 +1793,21 @@ def _decide_compiled(c: _Candidates, starts: np.ndarray, ends: np.ndarray, table
             near += (gap <= max_gap_ns) & (camera != b)
         simple = ~several & (near >= 2)
     shares = np.array([np.mean(simple), np.mean(~simple & ~several), np.mean(several)])
-    python_s = float(n_frames * (shares @ np.array(_PYTHON_S)))
-    if WHOLE_COMPILED is not None:
-        return WHOLE_COMPILED, python_s
     h_max = max(len(times) for times, _ in tables)
     k_max = max(table.shape[1] for _, table in tables)
+    # the numpy support pairs every candidate with each pair of another camera's frames
+    # around it, k_max² candidate pairs (every frame table is k_max wide): sessions of
+    # crowded frames cost that far more; from _KERNELS_FROM candidates the support is the
+    # compiled kernels' anyway (a 90-minute match with one frame of two candidates keeps
+    # the Python decider)
+    crowd_s = (len(c.camera) * k_max**2 * _PYTHON_PAIR_S
+               if k_max >= 2 and len(c.camera) < _KERNELS_FROM else 0.0)
+    python_s = float(n_frames * (shares @ np.array(_PYTHON_S))) + crowd_s
+    if WHOLE_COMPILED is not None:
+        return WHOLE_COMPILED, python_s
     if _whole_bytes(len(tables), h_max, k_max, len(c.camera)) > WHOLE_MAX_BYTES:
         return False, python_s
-    return bool(shares[1] + shares[2] >= WHOLE_FROM_SHARE), python_s
+    return bool(shares[1] + shares[2] >= WHOLE_FROM_SHARE or crowd_s >= WHOLE_LOAD_S), python_s
 
 
 def _whole_bytes(m: int, h_max: int, k_max: int, n: int) -> int:

@@ -1,7 +1,8 @@
 """A ground truth of one's own (motion capture, a measured trajectory) read for ``pslog eval
 --truth FILE``: a CSV ``t,x,y,z`` or a TUM trajectory, the formats ``pslog export`` writes.
 
-- CSV: a header naming the time column ``t`` (or ``time``, ``timestamp``) and ``x, y, z``;
+- CSV: a header naming the time column ``t`` (or ``time``, ``timestamp``) and ``x, y, z``
+  (separated by commas, or by tabs throughout);
   other columns are ignored (``pslog export --csv``'s ``camera`` and quality columns), but a
   ``method`` column must hold one method (a tracks CSV of one method, the truth of another
   rig). Times in seconds **on the original clock**: the clock of the CSV ``pslog import``
@@ -28,6 +29,7 @@ millimetres.
 
 from __future__ import annotations
 
+import codecs
 import csv
 import io
 from collections.abc import Sequence
@@ -42,12 +44,23 @@ from ..log._mcapio import starts_as_mcap
 from ..log.csvio import csv_rows
 from ..records import NS, Track, Truth
 
+#: bytes of a truth file judged text or not before the rest is read
+_TEXT_PROBE_BYTES = 1 << 20
 #: the names a CSV truth's time column may have (seconds)
 TIME_COLUMNS = ("t", "time", "timestamp")
 #: a truth whose positions lie a median this far (metres) from the world origin, a hundred
 #: times further than the tracks', is taken for millimetres and refused (as ``pslog rig
 #: import`` refuses cameras beyond 100 m without ``--units``)
 MILLIMETRE_LIMIT_M = 100.0
+#: a truth coordinate beyond this many metres from the world origin is refused, naming its
+#: line: no rig's world (1e308 was read, and the error sums overflowed with a numpy warning)
+MAX_POSITION_M = 1e6
+#: a truth whose samples lie a median this many times the tracks' point steps apart, over a
+#: span this many times theirs, holds times in another unit than seconds (milliseconds:
+#: 1000) and is refused (as ``pslog import`` refuses detections so far apart,
+#: :data:`pslog.log.csvio._UNIT_RATIO`); a truth that is merely sparse (a ball at rest
+#: measured twice) spans the tracks' time, not hundreds of times it
+UNIT_RATIO = 300.0
 
 
 @dataclass(frozen=True)
@@ -87,18 +100,32 @@ def read_truth_file(path: str | Path) -> TruthFile:
     """
     path = Path(path)
     check_input_file(path)
-    try:
-        data = path.read_bytes()
-    except OSError as exc:
-        raise InputError(f"cannot read {path}: {exc.strerror or exc}") from None
     if starts_as_mcap(path):
         raise InputError(f"{path} is an MCAP session, not a truth trajectory (a CSV t,x,y,z "
                          f"or a TUM file; a session's own truth needs no --truth)")
+
+    def binary(byte: int, why: str = "is not UTF-8 text") -> InputError:
+        return InputError(f"{path}: not a text file (byte {byte} {why}); expected a CSV "
+                          f"t,x,y,z or a TUM trajectory")
+
+    try:
+        with open(path, "rb") as handle:
+            # (its first MiB judged before the rest is read: a video given by mistake, GBs,
+            # was read whole into memory, twice, before 'not a text file')
+            data = handle.read(_TEXT_PROBE_BYTES)
+            try:
+                codecs.getincrementaldecoder("utf-8")().decode(data, final=False)
+            except UnicodeDecodeError as exc:
+                raise binary(exc.start) from None
+            if b"\0" in data:
+                raise binary(data.index(b"\0"), "is a NUL")
+            data += handle.read()
+    except OSError as exc:
+        raise InputError(f"cannot read {path}: {exc.strerror or exc}") from None
     try:
         text = data.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
-        raise InputError(f"{path}: not a text file (byte {exc.start} is not UTF-8 text); "
-                         f"expected a CSV t,x,y,z or a TUM trajectory") from None
+        raise binary(exc.start) from None
     first = next((line.strip() for line in text.splitlines() if line.strip()), "")
     if not first:
         raise InputError(f"{path}: empty file (expected a CSV t,x,y,z or a TUM trajectory)")
@@ -146,12 +173,15 @@ def _number(text: str, what: str, path: Path, line: int) -> float:
         value = float(text)
     except ValueError:
         value = None
-    if value is None or not np.isfinite(value):
+    if value is None or not np.isfinite(value) or abs(value) > MAX_POSITION_M:
         reason = ("empty" if not text.strip() else
-                  "not a number" if value is None else "not a finite number")
-        raise InputError(f"{path}: line {line}: {what} {text!r}: {reason} (every truth "
-                         f"sample needs a position in metres; a gap, a time without one: "
-                         f"x, y and z all empty)")
+                  "not a number" if value is None else "not a finite number"
+                  if not np.isfinite(value) else
+                  f"beyond any rig's world (at most {MAX_POSITION_M:g} m from the origin)")
+        raise InputError(f"{path}: line {line}: {what} {text!r}: {reason}"
+                         + (" (every truth sample needs a position in metres; a gap, a time "
+                            "without one: x, y and z all empty)" if "world" not in reason
+                            else ""))
     return value
 
 
@@ -196,7 +226,7 @@ def _read_csv(text: str, path: Path,
         shown = shown if len(shown) <= 200 else shown[:200] + "..."
         raise InputError(f"{path}: line 1: bad header {shown!r}: expected columns t,x,y,z "
                          f"(time in seconds, or named time or timestamp; x, y, z in metres; "
-                         f"other columns ignored)")
+                         f"other columns ignored)" + _separator_hint(header))
     cols = [lower.index(name) for name in "xyz"]
     method_col = lower.index("method") if "method" in lower else None
     times: list[int] = []
@@ -215,6 +245,15 @@ def _read_csv(text: str, path: Path,
                          f"({', '.join(methods)}): keep one method's rows as the truth")
     return (np.asarray(times, np.int64), np.asarray(positions, np.float64).reshape(-1, 3),
             lines)
+
+
+def _separator_hint(header: list[str]) -> str:
+    """A note for a header of one field holding semicolons (a spreadsheet's CSV where the
+    decimal mark is a comma)."""
+    if len(header) == 1 and ";" in header[0]:
+        return ("; its fields are separated by ';': separate them by commas (or tabs), with "
+                "decimal points")
+    return ""
 
 
 def _read_tum(text: str, path: Path) -> tuple[np.ndarray, np.ndarray, list[int]]:
@@ -307,6 +346,7 @@ def truth_for_tracks(read: TruthFile, tracks: Sequence[Track], origin_ns: int = 
         raise InputError(f"{read.path}: no time in common with {whose} "
                          f"{_span(lo + shift, hi + shift)}, both on {clock}; nothing to score")
     if spans:
+        _check_seconds(read, tracks, spans)
         known = read.truth.position_world
         known = known[np.isfinite(known).all(axis=1)]  # (a gap's NaN rows left out)
         truth_norm = float(np.median(np.linalg.norm(known, axis=1)))
@@ -317,11 +357,85 @@ def truth_for_tracks(read: TruthFile, tracks: Sequence[Track], origin_ns: int = 
             raise InputError(f"{read.path}: its positions lie a median {truth_norm:.4g} m from "
                              f"the world origin, the tracks' {track_norm:.3g} m: they look "
                              f"like millimetres; give metres (divide x, y, z by 1000)")
+        if origin_ns:
+            _check_clock(read, tracks, origin_ns)
     if not shift:
         return read.truth
     if not (-(2**63) <= first and last < 2**63):  # (an int64 of ns on the session clock)
         raise InputError(f"{read.path}: times beyond the session clock's range")
     return Truth(read.truth.time_ns - np.int64(shift), read.truth.position_world)
+
+
+def _other_clock(read: TruthFile, origin_ns: int) -> InputError:
+    """The error of a truth whose times are on the other clock than its format's."""
+    from ..log.csvio import format_time
+
+    t = read.truth.time_ns
+    if read.clock == "original":
+        return InputError(
+            f"{read.path}: its times ({_span(int(t[0]), int(t[-1]))}) are on the "
+            f"session clock, but a CSV truth's are on the original clock, as 'pslog "
+            f"export --csv' writes them: add the session's clock origin "
+            f"{format_time(origin_ns)} s to every time (or give the truth as a TUM "
+            f"file, on the session clock)")
+    return InputError(
+        f"{read.path}: its times ({_span(int(t[0]), int(t[-1]))}) are on the "
+        f"original clock, but a TUM truth's are on the session clock, as 'pslog "
+        f"export --tum' writes them: subtract the session's clock origin "
+        f"{format_time(origin_ns)} s from every time (or give the truth as a CSV "
+        f"t,x,y,z, on the original clock)")
+
+
+#: a truth that fits the tracks this many times better (median distance) read on the other
+#: clock than its format's is refused as on that clock (:func:`_check_clock`)
+OTHER_CLOCK_RATIO = 10.0
+
+
+def _median_distance(truth: Truth, tracks: Sequence[Track]) -> tuple[float, int]:
+    """Median distance (m) of the tracks' points from ``truth`` where it spans them, and
+    their count."""
+    d = [np.linalg.norm(truth.at(track.time_ns) - track.position_world, axis=1)
+         for track in tracks if len(track)]
+    every = np.concatenate(d) if d else np.zeros(0)
+    every = every[np.isfinite(every)]
+    return (float(np.median(every)) if len(every) else np.inf), len(every)
+
+
+def _check_clock(read: TruthFile, tracks: Sequence[Track], origin_ns: int) -> None:
+    """InputError if the truth, overlapping the tracks on its format's clock, fits them
+    :data:`OTHER_CLOCK_RATIO` times better on the other one (over at least half as many
+    points): the clocks of a session with a small origin (a first frame at -0.4 ms: -1 s)
+    overlap, and a truth on the wrong one scored every track a metre off in silence."""
+    t, position = read.truth.time_ns, read.truth.position_world
+    shift = origin_ns if read.clock == "original" else 0
+    other = 0 if read.clock == "original" else origin_ns
+    if not all(-(2**63) <= int(t[0]) - s and int(t[-1]) - s < 2**63 for s in (shift, other)):
+        return  # (times beyond the session clock's range on one clock: not that one)
+    given, n_given = _median_distance(Truth(t - np.int64(shift), position), tracks)
+    moved, n_moved = _median_distance(Truth(t - np.int64(other), position), tracks)
+    if n_moved >= max(3, n_given / 2) and OTHER_CLOCK_RATIO * moved < given:
+        raise _other_clock(read, origin_ns)
+
+
+def _check_seconds(read: TruthFile, tracks: Sequence[Track], spans) -> None:
+    """InputError if the truth's samples lie :data:`UNIT_RATIO` times the tracks' point
+    steps apart (medians) over a span that many times theirs: times in milliseconds (or
+    microseconds) read as seconds, which scored every track metres off in silence."""
+    steps = [float(np.median(np.diff(track.time_ns))) for track in tracks if len(track) >= 2]
+    t = read.truth.time_ns
+    if not steps or min(steps) <= 0:
+        return
+    step, track_step = float(np.median(np.diff(t))), min(steps)
+    span = float(t[-1] - t[0])
+    track_span = max(s[2] for s in spans) - min(s[1] for s in spans)
+    ratio = step / track_step
+    if ratio >= UNIT_RATIO and span >= UNIT_RATIO * max(track_span, track_step):
+        unit, factor = (("milliseconds", "1000") if ratio < 1000 * UNIT_RATIO
+                        else ("microseconds", "1e6"))
+        raise InputError(f"{read.path}: its samples lie a median {step / NS:.4g} s apart over "
+                         f"{span / NS:.4g} s, {ratio:.0f} times the tracks' "
+                         f"{track_step / NS * 1e3:.4g} ms over {track_span / NS:.4g} s: the "
+                         f"times look like {unit}; give seconds (divide them by {factor})")
 
 
 def describe(read: TruthFile, truth: Truth, origin_ns: int = 0) -> str:

@@ -20,6 +20,8 @@ Detections CSV (import and export use exactly this format)::
   (``cam1,0.011111111,,,1,``): a frame, no candidate.
 - One CSV per camera (:func:`read_camera_csvs`, ``pslog import --detections NAME=FILE``):
   the same rows without the ``camera`` column (or with it, naming that camera in every row).
+- Fields separated by commas, or by tabs throughout (a first line of tabs and no comma: a
+  .tsv, a spreadsheet's "text, tab delimited").
 
 Export writes all six columns, times as exact decimals with 9 digits and pixels with
 ``repr`` precision, and a row for every frame without a candidate, so export -> import
@@ -36,6 +38,7 @@ original times come back to the nanosecond. Times are never converted through fl
 
 from __future__ import annotations
 
+import codecs
 import csv
 from decimal import ROUND_HALF_EVEN, Decimal, InvalidOperation
 from pathlib import Path
@@ -146,8 +149,8 @@ def csv_rows(reader, n_fields: int, path):
                 raise InputError(f"{path}: line {line}: expected {n_fields} fields, got "
                                  f"{len(row)}")
             yield line, row
-    except csv.Error as exc:
-        raise InputError(f"{path}: line {line}: {exc}") from None
+    except csv.Error as exc:  # (the line the reader stopped on: the faulty one)
+        raise InputError(f"{path}: line {reader.line_num}: {exc}") from None
     except UnicodeDecodeError:
         raise InputError(f"{path}: line {line + 1}: not UTF-8 text") from None
 
@@ -221,8 +224,24 @@ def read_detections_csv(path, rig: Rig, camera: str | None = None,
         raise InputError(f"cannot read {path}: {exc.strerror or exc}") from None
     index = {name: i for i, name in enumerate(rig.names)}
     cams, times, frames, uv, scores, lines, missed = [], [], [], [], [], [], []
+    head = _head(path)
+    nul = head.find(b"\0")
+    try:  # (invalid UTF-8 before it: said so below, as the reader meets it)
+        codecs.getincrementaldecoder("utf-8")().decode(head[:nul] if nul >= 0 else b"")
+    except UnicodeDecodeError:
+        nul = -1
+    if nul >= 0:  # (a text file holds none: a file of zeros was read whole as one line)
+        handle.close()
+        from ._mcapio import starts_as_mcap
+
+        if starts_as_mcap(path):
+            raise InputError(f"{path} is an MCAP session, not a detections CSV (export "
+                             f"its detections with 'pslog export {shell_word(path)} "
+                             f"--detections DET.csv')")
+        raise InputError(f"{path}: not a text CSV file (byte {nul} is a NUL); expected "
+                         f"header {expected}")
     with handle:
-        reader = csv.reader(handle)
+        reader = csv.reader(handle, delimiter="\t" if _tab_separated(head) else ",")
         try:
             header = next(reader, None)
         except UnicodeDecodeError as exc:  # (not the codec's own words)
@@ -259,7 +278,9 @@ def read_detections_csv(path, rig: Rig, camera: str | None = None,
                 + (f" (unknown: {', '.join(unknown)})" if unknown else "")
                 + (f" (missing: {', '.join(missing)})" if missing else "")
                 + ("; one camera's file: name its camera, --detections CAMERA=FILE"
-                   if missing == ["camera"] and not unknown else ""))
+                   if missing == ["camera"] and not unknown else "")
+                + ("; its fields are separated by ';': separate them by commas (or tabs), "
+                   "with decimal points" if len(header) == 1 and ";" in header[0] else ""))
         col = {name: header.index(name) for name in header}
         has_frame, has_score = "frame" in col, "score" in col
         for line, row in csv_rows(reader, len(header), path):
@@ -291,6 +312,22 @@ def read_detections_csv(path, rig: Rig, camera: str | None = None,
                                  np.asarray(scores, np.float64) if has_score else None, path,
                                  np.asarray(lines, np.int64), np.asarray(missed, bool),
                                  empty=empty)
+
+
+def _head(path: Path) -> bytes:
+    """The file's first MiB (empty where it cannot be read: its reader says why)."""
+    try:
+        with open(path, "rb") as raw:
+            return raw.read(1 << 20)
+    except OSError:
+        return b""
+
+
+def _tab_separated(head: bytes) -> bool:
+    """Whether the first line of ``head`` holds tabs and no comma: a tab-separated file (a
+    .tsv, a spreadsheet's "text, tab delimited"), read as such."""
+    line = head.lstrip(b"\r\n").partition(b"\n")[0]
+    return b"\t" in line and b"," not in line
 
 
 def read_camera_csvs(files, rig: Rig) -> Detections:
