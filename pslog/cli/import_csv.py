@@ -47,6 +47,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "cam1=left.csv --detections cam2=right.csv); such a file's "
                              "header is time,u,v (optional frame,score), and a camera column, "
                              "if it has one, must name that camera in every row")
+    parser.add_argument("--columns", metavar="NAME=COLUMN,...",
+                        help="read a detector's own column names as pslog's, e.g. "
+                             "--columns time=t_unix,u=px,v=py,frame=frame_id,score=conf "
+                             "(names: camera, time, u, v, frame, score; each column named "
+                             "must be in every file)")
     parser.add_argument("--timing", default="rig", choices=(*TIMING_PRESETS, "rig"),
                         help="set the rig's shutter offsets from a preset (default: 'rig', the "
                              "rig's own offsets); the session's timing label names the preset "
@@ -64,6 +69,7 @@ def run(args: argparse.Namespace) -> int:
     from pslog.log.csvio import (
         CLOCK_ORIGIN_KEY,
         format_time,
+        parse_columns,
         read_camera_csvs,
         read_detections_csv,
         session_clock,
@@ -80,8 +86,16 @@ def run(args: argparse.Namespace) -> int:
     # (their errors name the file and line)
     files = list(named.values()) if named else [args.detections[0]]
     label = ", ".join(files)
-    read = (read_camera_csvs(named, rig) if named  # one CSV per camera
-            else read_detections_csv(label, rig))
+    columns = None
+    if args.columns is not None:
+        try:
+            columns = parse_columns(args.columns)
+        except InputError as exc:  # (a bad command-line value: exit 2)
+            from ._common import usage_error
+
+            return usage_error("import", f"argument {exc}")
+    read = (read_camera_csvs(named, rig, columns) if named  # one CSV per camera
+            else read_detections_csv(label, rig, columns=columns))
     try:
         detections, origin_ns = session_clock(read)
     except InputError as exc:  # (session_clock judges the times, not the file: name it)

@@ -186,8 +186,31 @@ def session_clock(detections: Detections) -> tuple[Detections, int]:
     return shifted, origin
 
 
+def parse_columns(text: str) -> dict[str, str]:
+    """``--columns`` of ``pslog import``: ``NAME=COLUMN,...`` (a pslog column each, e.g.
+    ``time=t_unix,u=px,v=py,frame=frame_id,score=conf``) as {file's column: pslog's}. Raises
+    InputError naming a malformed item, a name that is not a detections column, a name or a
+    file's column given twice."""
+    out: dict[str, str] = {}
+    named: set[str] = set()
+    for item in text.split(","):
+        name, eq, column = (part.strip() for part in item.partition("="))
+        if not eq or not name or not column:
+            raise InputError(f"--columns: {item.strip()!r} is not NAME=COLUMN (e.g. "
+                             f"time=t_unix,u=px,v=py)")
+        if name not in DETECTION_COLUMNS:
+            raise InputError(f"--columns: {name!r} is not a detections column (one of "
+                             f"{', '.join(DETECTION_COLUMNS)})")
+        if name in named or column in out:
+            raise InputError(f"--columns: {name if name in named else column!r} given twice")
+        named.add(name)
+        out[column] = name
+    return out
+
+
 def read_detections_csv(path, rig: Rig, camera: str | None = None,
-                        empty: bool = False) -> Detections:
+                        empty: bool = False, columns: dict[str, str] | None = None
+                        ) -> Detections:
     """Parse a detections CSV (format in the module docstring) against ``rig``'s cameras.
 
     Times are the CSV's own (int64 ns, any sign); :func:`session_clock` puts them on a
@@ -203,6 +226,9 @@ def read_detections_csv(path, rig: Rig, camera: str | None = None,
         ``camera`` column optional, and where there every row must name ``camera``
     empty : a file of no rows (its header alone) is read as no frames, not refused
         (:func:`read_camera_csvs`: a camera that saw nothing)
+    columns : {the file's column: pslog's} (:func:`parse_columns`: ``pslog import
+        --columns``), a detector's own header read as pslog's; each named column must be in
+        the file
 
     Raises InputError naming the line (and column) of the first malformed row or unknown
     camera (or, with ``camera``, a row naming another).
@@ -258,6 +284,13 @@ def read_detections_csv(path, rig: Rig, camera: str | None = None,
         if header is None:
             raise InputError(f"{path}: empty file (expected header {expected})")
         header = [h.strip() for h in header]
+        if columns:  # (a detector's own names: --columns)
+            absent = [c for c in columns if c not in header]
+            if absent:
+                raise InputError(f"{path}: line 1: no column {absent[0]!r} (--columns "
+                                 f"{columns[absent[0]]}={absent[0]}); the header has "
+                                 f"{', '.join(header)[:200]}")
+            header = [columns.get(h, h) for h in header]
         unknown = [h for h in header if h not in DETECTION_COLUMNS]
         missing = [h for h in required if h not in header]
         if tuple(header[:len(TRACK_COLUMNS)]) == TRACK_COLUMNS:  # (pslog export --csv's)
@@ -330,7 +363,7 @@ def _tab_separated(head: bytes) -> bool:
     return b"\t" in line and b"," not in line
 
 
-def read_camera_csvs(files, rig: Rig) -> Detections:
+def read_camera_csvs(files, rig: Rig, columns: dict[str, str] | None = None) -> Detections:
     """One CSV per camera (``pslog import --detections NAME=FILE ...``) as one session's
     detections: each file read by :func:`read_detections_csv` as its camera's, the frames of
     all joined. The same detections as one CSV of every file's rows, each with its camera
@@ -347,7 +380,7 @@ def read_camera_csvs(files, rig: Rig) -> Detections:
 
     Raises InputError as :func:`read_detections_csv`, naming the file and line.
     """
-    parts = [read_detections_csv(path, rig, camera=name, empty=True)
+    parts = [read_detections_csv(path, rig, camera=name, empty=True, columns=columns)
              for name, path in files.items()]
     if all(d.n_frames == 0 for d in parts):
         raise InputError(f"{', '.join(map(str, files.values()))}: no detection rows")
