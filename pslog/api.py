@@ -377,7 +377,7 @@ def sync(session: Session | str | os.PathLike[str],
         # (session 40: offsets of seconds first scanned coarsely, by the agreement of every
         # moving candidate with camera 1's track; the spline scan alone reaches half a
         # frame period, and a wide --search-ms found a wrong offset)
-        start, delta, coarse_notes = _coarse_start(detections, rig)
+        start, moved, coarse_notes = _coarse_start(detections, rig)
         rough: Rig | None
         try:
             rough = estimate_clocks(detections.best(), start, ("offset",), search_s,
@@ -385,11 +385,9 @@ def sync(session: Session | str | os.PathLike[str],
         except FusionError:
             # (the best-scored candidates may be a static object's, which fix no offset:
             # the coarse scan's, within a quarter of a frame period, gates as well)
-            rough = start if np.any(delta) else None
+            rough = start if moved else None
         again = None if rough is None else _ball_candidates(detections, rough)
         if again is not None and not again[2]:
-            moved = ", ".join(f"{cam.name} {d * 1e3:+.1f} ms"
-                              for cam, d in zip(rig.cameras, delta.tolist(), strict=True) if d)
             gated_note = (f"{again[1]}, at clocks estimated first "
                           + (f"by a coarse scan of the offsets ({moved}) and " if moved else "")
                           + f"from each frame's best-scored candidate: at the logged clocks "
@@ -439,8 +437,8 @@ def sync(session: Session | str | os.PathLike[str],
             # and the estimate again from its offsets (session 40)
             if found is not None or isinstance(exc, ClockSpanError):
                 raise
-            start, delta, coarse_notes = _coarse_start(detections, rig)
-            if not np.any(delta):
+            start, moved, coarse_notes = _coarse_start(detections, rig)
+            if not moved:
                 raise
             progress.step("estimating again from a coarse scan of the offsets")
             obs = _ball_candidates(detections, start)[0]
@@ -449,8 +447,6 @@ def sync(session: Session | str | os.PathLike[str],
                                          regularized=reports)
             except FusionError:
                 raise exc from None
-            moved = ", ".join(f"{cam.name} {d * 1e3:+.1f} ms"
-                              for cam, d in zip(rig.cameras, delta.tolist(), strict=True) if d)
             notes.append(f"estimated from a coarse scan of the offsets ({moved}): from the "
                          f"rig's clocks the estimate failed ({exc})")
     except FusionError as exc:
@@ -471,10 +467,11 @@ def sync(session: Session | str | os.PathLike[str],
                        recorded_clocks(read.rig, read.metadata)[0], prior_estimated)
 
 
-def _coarse_start(detections: Detections, rig: Rig) -> tuple[Rig, np.ndarray, list[str]]:
+def _coarse_start(detections: Detections, rig: Rig) -> tuple[Rig, str, list[str]]:
     """``rig`` with each camera's clock offset moved by sync's coarse scan
     (:func:`pslog.estimation.sync.coarse_offsets` over ±:data:`COARSE_SPAN_S`, at most the
-    span of the frames holding a candidate), the moves (m,) s and the scan's notes."""
+    span of the frames holding a candidate), the moves as said in sync's notes (``cam2
+    +3000.0 ms, ...``; empty: none) and the scan's notes."""
     from .estimation.sync import coarse_offsets
     from .fusion._prepare import default_max_gap_s
     from .rig import Rig
@@ -484,10 +481,12 @@ def _coarse_start(detections: Detections, rig: Rig) -> tuple[Rig, np.ndarray, li
     delta, notes = coarse_offsets(detections, rig, min(COARSE_SPAN_S, max(1.0, span)),
                                   default_max_gap_s(rig))
     if not np.any(delta):
-        return rig, delta, notes
+        return rig, "", notes
+    moved = ", ".join(f"{cam.name} {d * 1e3:+.1f} ms"
+                      for cam, d in zip(rig.cameras, delta.tolist(), strict=True) if d)
     return (Rig(tuple(cam.replace(clock_offset=cam.clock_offset + d)
                       for cam, d in zip(rig.cameras, delta.tolist(), strict=True)), rig.name),
-            delta, notes)
+            moved, notes)
 
 
 #: Steps between a camera's consecutive frame numbers longer than this many frame periods

@@ -122,8 +122,11 @@ def test_export_says_which_formats_keep_the_session_clock(tmp_path):
                           f"docs/interchange.md)"), first
 
 
-def test_sync_regates_when_its_gating_lost_the_ball_to_far_clocks(tmp_path):
-    far = _shifted_csv(tmp_path, "0.25", duration="8")  # cam2's host clock 0.25 s ahead
+def _synced_far(tmp_path, shift: str):
+    """cam2's host clock ``shift`` seconds ahead in its CSV times: imported with paper2,
+    synced (offsets) to ``synced.mcap``; the sync said it scanned the offsets coarsely and
+    regated, and found cam2's offset to 1 ms. Returns (the CSV, the session)."""
+    far = _shifted_csv(tmp_path, shift, duration="8")
     session = tmp_path / "far.mcap"
     _ok("import", "--rig", "paper2", "--detections", far, "-o", session)
     done = _run("sync", session, "-o", tmp_path / "synced.mcap", "--estimate", "offset",
@@ -133,7 +136,13 @@ def test_sync_regates_when_its_gating_lost_the_ball_to_far_clocks(tmp_path):
     assert "and from each frame's best-scored candidate: at the logged clocks the gating " \
            "lost " in done.stderr, done.stderr
     offset = json.loads(done.stdout)["cameras"][1]["offset_s"]
-    assert abs(offset + 0.25) < 1e-3, offset  # (206 ms wrong on the walk's session before)
+    assert abs(offset + float(shift)) < 1e-3, offset
+    return far, session
+
+
+def test_sync_regates_when_its_gating_lost_the_ball_to_far_clocks(tmp_path):
+    # (0.25 s: 206 ms wrong on the walk's session before session 39)
+    _, session = _synced_far(tmp_path, "0.25")
     # fused without the sync, the session says which step was skipped; synced, nothing
     out = _ok("fuse", session, "--method", "nearest", "-o", tmp_path / "f.mcap")
     assert f"the cameras' clocks are likely further apart than it allows (a few ms), and " \
@@ -159,16 +168,9 @@ def test_fuse_says_nothing_of_clocks_on_a_dirty_session_on_one_clock(tmp_path):
 
 
 def test_sync_finds_a_3_s_offset_and_the_rigs_clock_offset_helps_too(tmp_path):
-    far = _shifted_csv(tmp_path, "3", duration="8")  # 3 s: beyond the rough clocks' scan
-    session = tmp_path / "far.mcap"
-    _ok("import", "--rig", "paper2", "--detections", far, "-o", session)
-    done = _run("sync", session, "-o", tmp_path / "synced.mcap", "--estimate", "offset",
-                "--json")
-    # (session 39: wrong by 3 s, with a note; since session 40 the coarse scan finds it)
-    assert done.returncode == 0, done.stderr
-    assert "at clocks estimated first by a coarse scan of the offsets (cam2 " in done.stderr
-    offset = json.loads(done.stdout)["cameras"][1]["offset_s"]
-    assert abs(offset + 3) < 1e-3, offset
+    # 3 s: beyond the rough clocks' scan (session 39: wrong by 3 s, with a note; since
+    # session 40 the coarse scan finds it)
+    far, _ = _synced_far(tmp_path, "3")
     # and the rig's clock_offset near the truth: no frame lost, the offset right
     rig = tmp_path / "rig.toml"
     text = _ok("rig", "show", "paper2", "--timing", "typeA")
