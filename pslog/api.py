@@ -229,6 +229,9 @@ class SyncOutcome:
         (:func:`pslog.timing.recorded_clocks` of every clock parameter); the estimate
         started from it and tested against it for the parameters it estimates (or auto
         tests), the others kept at the copy's values
+    motion_period_s : the period (s) with which the ball's motion repeats in every camera's
+        view (:func:`pslog.estimation.sync.motion_period`; a turntable), or None: offsets
+        whole periods apart then fit alike, and ``notes`` says so
     prior_estimated : whether ``prior`` holds clock estimates of an earlier sync that did
         not record its own starting model (a pslog before session 38), as known values: said
         in ``notes`` and recorded with the copy, so that every later sync says it too
@@ -242,6 +245,7 @@ class SyncOutcome:
     notes: tuple[str, ...] = ()
     prior: Rig | None = None
     prior_estimated: bool = False
+    motion_period_s: float | None = None
 
 
 def sync(session: Session | str | os.PathLike[str],
@@ -460,11 +464,31 @@ def sync(session: Session | str | os.PathLike[str],
         raise FusionError(f"{exc}; note: {several} of {detections.n_frames} frames hold "
                           f"several candidates and a false one the gating kept (a "
                           f"reflection, a second ball) may be the cause") from None
+    # a periodic motion (a turntable): offsets whole periods apart fit alike, the estimate
+    # took those nearest where it started; said (session 41: a rig 2 s off settled on
+    # -666.7 ms, one of the aliases of a 1.333 s turntable, with its ± 0.16 ms, silently)
+    period = None
+    if "offset" in result.estimated:
+        from .estimation.sync import motion_period
+        from .fusion._prepare import default_max_gap_s
+
+        period = motion_period(obs, result.rig, default_max_gap_s(result.rig))
+    if period is not None:
+        half = period / 2 * 1e3
+        offsets = ", ".join(f"{cam.name} {cam.clock_offset * 1e3:+.2f} ms"
+                            for cam in result.rig.cameras[1:])
+        notes.append(f"the ball's motion repeats every {period * 1e3:.1f} ms in every "
+                     f"camera's view (a periodic motion: a turntable, a pendulum): each offset "
+                     f"is known only up to whole periods ({offsets}, each ± k·"
+                     f"{period * 1e3:.1f} ms, fit alike); sync kept those nearest its start "
+                     f"(the rig's clocks): give a camera's clock_offset in the rig within "
+                     f"{half:.0f} ms of its truth, or sync a stretch where the ball moves "
+                     f"otherwise")
     # the model recorded for the next sync: every parameter's, those this sync kept at the
     # copy's values too (they are an earlier sync's estimates of this data: recording them
     # as the prior lost the model before the first sync; review39)
     return SyncOutcome(result.rig, result, detections, obs, reports, tuple(notes),
-                       recorded_clocks(read.rig, read.metadata)[0], prior_estimated)
+                       recorded_clocks(read.rig, read.metadata)[0], prior_estimated, period)
 
 
 def _coarse_start(detections: Detections, rig: Rig) -> tuple[Rig, str, list[str]]:

@@ -41,6 +41,7 @@ motion) — each estimate's standard deviation says how well the data determined
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -1298,3 +1299,125 @@ def _still(uv: np.ndarray) -> np.ndarray:
             total += np.where(hit, counts[at], 0)
     still[ok] = total[inverse.ravel()] >= _STILL_SHARE * len(uv)
     return still
+
+
+#: A motion repeats with period ``L`` (:func:`motion_period`) where, in every camera's view,
+#: three quarters of its detections lie within this many pixels of its own track ``L`` later.
+PERIOD_TOL_PX = 3.0
+#: ... and the track moves: at some shorter lag, a quarter of them lie further than this.
+PERIOD_MOVES_PX = 30.0
+#: The lags tried: from this (s) to half the span of a camera's detections, at most
+#: :data:`PERIOD_MAX_S`, on a grid of :data:`_PERIOD_STEP_S`, then refined to
+#: :data:`_PERIOD_FINE_S`.
+PERIOD_MIN_S = 0.1
+PERIOD_MAX_S = 20.0
+_PERIOD_STEP_S = 2e-3
+_PERIOD_FINE_S = 5e-5
+#: The close lags from the first searched for the least distance (grid steps).
+_PERIOD_RUN = 50
+#: Detections of each camera compared at each lag (evenly spaced among its own).
+_PERIOD_DETECTIONS = 400
+
+
+def motion_period(obs: Observations, rig: Rig, max_gap_s: float) -> float | None:
+    """The period (s) with which the ball's motion repeats in every camera's view (a
+    turntable, a pendulum), or None: the time shift under which each camera's track maps
+    onto itself, so that offsets whole periods apart fit the detections equally well and
+    no estimate from them can tell them apart (session 41).
+
+    At a lag ``L``, each of (up to :data:`_PERIOD_DETECTIONS` of) a camera's detections at
+    time ``t`` (the rig's clock model applied) is compared with the camera's own pixel at
+    ``t + L``, linearly interpolated between its two detections around it (no further apart
+    than ``max_gap_s``). ``L`` is a period where, for every camera, at least 30 such pairs
+    exist (a quarter of those tried) and three quarters of them lie within
+    :data:`PERIOD_TOL_PX`, while at some shorter lag a quarter lie further than
+    :data:`PERIOD_MOVES_PX` (a ball at rest repeats at any lag: no period). The smallest such
+    ``L`` of a grid of :data:`_PERIOD_STEP_S` from :data:`PERIOD_MIN_S` to half the shortest
+    camera span (at most :data:`PERIOD_MAX_S`), refined at :data:`_PERIOD_FINE_S` to the
+    lag of least distance nearby.
+
+    Parameters
+    ----------
+    obs : Observations, the ball, one per frame, at LOGGED times
+    rig : Rig, the clock model (an estimate's) applied to ``obs``
+    max_gap_s : float, the widest pair of a camera's detections interpolated, s
+
+    Returns
+    -------
+    float or None : the period, s
+    """
+    from ..timing import true_times_ns
+
+    if len(obs) == 0 or len(rig) < 2:
+        return None
+    p = camera_parameters(rig)
+    cam = obs.camera.astype(np.int64)
+    t = true_times_ns(obs.time_ns, obs.uv[:, 1], p["height"][cam], p["clock_offset"][cam],
+                      p["clock_drift_ppm"][cam], p["readout"][cam]) / NS
+    tracks = []
+    for c in range(len(rig)):
+        rows = np.flatnonzero(cam == c)
+        rows = rows[np.argsort(t[rows], kind="stable")]
+        if len(rows) < 2 * MIN_DETECTIONS:
+            return None  # (a camera seen too little repeats nothing that can be told)
+        tracks.append((t[rows], obs.uv[rows]))
+    span = min(float(tc[-1] - tc[0]) for tc, _ in tracks)
+    top = min(PERIOD_MAX_S, span / 2)
+    if top <= PERIOD_MIN_S:
+        return None
+
+    def distances(c: int, lags: np.ndarray) -> np.ndarray:
+        """(k, n) camera ``c``'s pixel distances from its detections at ``t`` to its track
+        at ``t + lags`` (k,) (NaN: no pair of detections around it within the gap)."""
+        tc, uc = tracks[c]
+        rows = np.unique(np.linspace(0, len(tc) - 1, _PERIOD_DETECTIONS).astype(int))
+        at = tc[rows][None, :] + lags[:, None]
+        j = np.clip(np.searchsorted(tc, at), 1, len(tc) - 1)
+        ta, tb = tc[j - 1], tc[j]
+        inside = (ta <= at) & (at <= tb) & (tb - ta <= max_gap_s)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            w = np.where(tb > ta, (at - ta) / (tb - ta), 0.0)
+            du = uc[j - 1, 0] + w * (uc[j, 0] - uc[j - 1, 0]) - uc[rows, 0]
+            dv = uc[j - 1, 1] + w * (uc[j, 1] - uc[j - 1, 1]) - uc[rows, 1]
+        return np.where(inside, np.hypot(du, dv), np.nan)
+
+    def shares(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(k,) the share of each lag's pairs within PERIOD_TOL_PX and beyond
+        PERIOD_MOVES_PX (0 where too few pairs)."""
+        pairs = np.count_nonzero(~np.isnan(d), axis=1)
+        enough = pairs >= max(MIN_DETECTIONS, d.shape[1] // 4)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            close = np.count_nonzero(d <= PERIOD_TOL_PX, axis=1) / pairs
+            far = np.count_nonzero(d > PERIOD_MOVES_PX, axis=1) / pairs
+        return np.where(enough, close, 0.0), np.where(enough, far, 0.0)
+
+    lags = np.arange(PERIOD_MIN_S, top + _PERIOD_STEP_S / 2, _PERIOD_STEP_S)
+    # camera 1's track first, every lag (a count per lag: cheap); the other cameras and
+    # the motion's own movement only at the lags where it repeats
+    chunk = max(1, 2_000_000 // _PERIOD_DETECTIONS)
+    close = np.concatenate([shares(distances(0, lags[s:s + chunk]))[0] >= 0.75
+                            for s in range(0, len(lags), chunk)])
+    for k in np.flatnonzero(close):
+        if not all(shares(distances(c, lags[k:k + 1]))[0][0] >= 0.75
+                   for c in range(1, len(rig))):
+            continue
+        shorter = lags[:k:10]  # (the track moves between: not a ball at rest)
+        if not len(shorter) or not any(np.any(shares(distances(c, shorter))[1] >= 0.75)
+                                       for c in range(len(rig))):
+            continue
+        # the run of close lags from the first (the tolerance admits a few ms either side
+        # of the period: a ball at 500 px/s moves 3 px in 6 ms), its least median distance
+        # among every camera's, refined
+        def worst(trial: np.ndarray) -> np.ndarray:
+            with np.errstate(invalid="ignore"), warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)
+                return np.max([np.nanmedian(distances(c, trial), axis=1)
+                               for c in range(len(rig))], axis=0)
+
+        near = lags[k:k + _PERIOD_RUN]
+        run = int(np.argmin(np.r_[close[k:k + _PERIOD_RUN], False]))
+        best = near[int(np.nanargmin(worst(near[:max(run, 1)])))]
+        fine = best + np.arange(-_PERIOD_STEP_S, _PERIOD_STEP_S + _PERIOD_FINE_S / 2,
+                                _PERIOD_FINE_S)
+        return float(fine[np.nanargmin(worst(fine))])
+    return None
