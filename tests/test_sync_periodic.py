@@ -58,6 +58,11 @@ def test_no_period_where_the_track_does_not_repeat_or_does_not_move():
     grown = 320 + (obs.uv - 320) * (1 + 0.025 * t / 0.8)[:, None]
     assert motion_period(Observations(obs.time_ns, obs.camera, grown, obs.frame_index),
                          rig, gap) is None
+    # camera 1's view repeats, camera 2's does not (the motion along camera 1's rays
+    # differs turn by turn): the other camera tells the offsets apart
+    mine = np.where((obs.camera == 1)[:, None], grown, obs.uv)
+    assert motion_period(Observations(obs.time_ns, obs.camera, mine, obs.frame_index),
+                         rig, gap) is None
     # a ball at rest (pixel noise 0.3 px): the same at every lag, but it does not move
     still = np.random.default_rng(68200).normal([320, 240], 0.3, size=(len(obs), 2))
     assert motion_period(Observations(obs.time_ns, obs.camera, still, obs.frame_index),
