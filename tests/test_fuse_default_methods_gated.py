@@ -8,22 +8,16 @@ writes."""
 
 from __future__ import annotations
 
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
+from _cli import pslog as _pslog
 
 from pslog.fusion import FusionOptions, default_methods
 from pslog.log import read_session
 from pslog.rig import load_rig
 
 WEBCAMS3 = Path(__file__).resolve().parents[1] / "benchmarks" / "webcams3.toml"
-
-
-def _pslog(*args) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "pslog", *map(str, args)],
-                          capture_output=True, text=True, timeout=300)
 
 
 def _rig(path: Path, clocks: bool) -> Path:

@@ -9,20 +9,14 @@ Through the real CLI on a session ``pslog simulate`` writes (the new user's webc
 
 from __future__ import annotations
 
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
+from _cli import pslog as _pslog
 
 from pslog.log import read_session
 
 WEBCAMS3 = Path(__file__).resolve().parents[1] / "benchmarks" / "webcams3.toml"
-
-
-def _pslog(*args) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "pslog", *map(str, args)],
-                          capture_output=True, text=True, timeout=300)
 
 
 def test_a_missed_ball_does_not_hide_the_object_chosen_beside_it(tmp_path):

@@ -7,20 +7,14 @@ scan and the joint estimate from there. Before it, a 3 s offset gave 1.5 ms with
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 
 import numpy as np
 import pytest
+from _cli import pslog as _pslog
 
 from pslog import read_session
 from pslog.estimation.sync import _still, coarse_offsets
 from pslog.fusion._prepare import default_max_gap_s
-
-
-def _pslog(*args) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "pslog", *map(str, args)],
-                          capture_output=True, text=True, timeout=600)
 
 
 def _offsets(path) -> dict[str, float]:

@@ -6,11 +6,10 @@ a word."""
 from __future__ import annotations
 
 import re
-import subprocess
-import sys
 
 import numpy as np
 import pytest
+from _cli import pslog as _pslog
 
 from pslog import read_session
 from pslog.estimation.sync import motion_period
@@ -21,11 +20,6 @@ from pslog.rig import builtin_rig
 from pslog.simulation import SimulationOptions, simulate_labelled, true_rig
 
 TURNTABLE_S = 60 / 45  # the paper's 45 rpm
-
-
-def _pslog(*args) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "pslog", *map(str, args)],
-                          capture_output=True, text=True, timeout=600)
 
 
 def _circle(period_s: float, fps: float = 30.0, seconds: float = 6.0) -> Observations:

@@ -9,20 +9,12 @@ Through ``pslog`` as a process, on sessions ``pslog simulate`` writes."""
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 
 import numpy as np
+from _cli import pslog_ok as _pslog
 
 from pslog.log import read_session
 from pslog.timing import CLOCK_KEYS
-
-
-def _pslog(*argv) -> str:
-    done = subprocess.run([sys.executable, "-m", "pslog.cli", *map(str, argv)],
-                          capture_output=True, text=True, timeout=600)
-    assert done.returncode == 0, done.stderr
-    return done.stdout
 
 
 def _clocks(path) -> tuple[list, dict]:

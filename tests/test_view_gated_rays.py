@@ -8,10 +8,8 @@ the real CLI on sessions ``pslog simulate`` writes; the .rrd read back."""
 
 from __future__ import annotations
 
-import subprocess
-import sys
-
 import numpy as np
+from _cli import pslog as _pslog
 from _rrd import batch_column, temporal_chunks
 
 from pslog.log import read_session
@@ -27,11 +25,6 @@ def _rejected(det, rej) -> np.ndarray:
     return np.array([k in keys for k in zip(
         det.frame_camera[rows].tolist(), det.frame_index[rows].tolist(),
         det.cand_uv[:, 0].tolist(), det.cand_uv[:, 1].tolist(), strict=True)], dtype=bool)
-
-
-def _pslog(*args) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "pslog", *map(str, args)],
-                          capture_output=True, text=True, timeout=300)
 
 
 def test_rays_and_epipolar_lines_follow_the_gates_choice_not_the_best_score(tmp_path):

@@ -32,20 +32,10 @@ from __future__ import annotations
 
 import csv
 import json
-import subprocess
-import sys
 from decimal import Decimal
 
-
-def _run(*argv) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "pslog.cli", *map(str, argv)],
-                          capture_output=True, text=True, timeout=600)
-
-
-def _ok(*argv) -> str:
-    done = _run(*argv)
-    assert done.returncode == 0, done.stderr
-    return done.stdout
+from _cli import pslog as _run
+from _cli import pslog_ok as _ok
 
 
 def _shifted_csv(tmp_path, shift_s: str, cam1_shift_s: str = "0", duration: str = "4"):

@@ -21,25 +21,14 @@ from __future__ import annotations
 
 import csv
 import json
-import subprocess
-import sys
 from decimal import Decimal
 from pathlib import Path
 
 import numpy as np
+from _cli import pslog as _run
+from _cli import pslog_ok as _ok
 
 from pslog.log import read_session
-
-
-def _run(*argv) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "pslog.cli", *map(str, argv)],
-                          capture_output=True, text=True, timeout=600)
-
-
-def _ok(*argv) -> str:
-    done = _run(*argv)
-    assert done.returncode == 0, done.stderr
-    return done.stdout
 
 
 def _lab_csvs(tmp_path: Path, *, frame: str | None, extra: tuple[str, ...] = (),
