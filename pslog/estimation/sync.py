@@ -1392,32 +1392,45 @@ def motion_period(obs: Observations, rig: Rig, max_gap_s: float) -> float | None
         return np.where(enough, close, 0.0), np.where(enough, far, 0.0)
 
     lags = np.arange(PERIOD_MIN_S, top + _PERIOD_STEP_S / 2, _PERIOD_STEP_S)
-    # camera 1's track first, every lag (a count per lag: cheap); the other cameras and
-    # the motion's own movement only at the lags where it repeats
     chunk = max(1, 2_000_000 // _PERIOD_DETECTIONS)
-    close = np.concatenate([shares(distances(0, lags[s:s + chunk]))[0] >= 0.75
-                            for s in range(0, len(lags), chunk)])
-    for k in np.flatnonzero(close):
-        if not all(shares(distances(c, lags[k:k + 1]))[0][0] >= 0.75
-                   for c in range(1, len(rig))):
-            continue
-        shorter = lags[:k:10]  # (the track moves between: not a ball at rest)
-        if not len(shorter) or not any(np.any(shares(distances(c, shorter))[1] >= 0.75)
-                                       for c in range(len(rig))):
-            continue
-        # the run of close lags from the first (the tolerance admits a few ms either side
-        # of the period: a ball at 500 px/s moves 3 px in 6 ms), its least median distance
-        # among every camera's, refined
-        def worst(trial: np.ndarray) -> np.ndarray:
-            with np.errstate(invalid="ignore"), warnings.catch_warnings():
-                warnings.simplefilter("ignore", RuntimeWarning)
-                return np.max([np.nanmedian(distances(c, trial), axis=1)
-                               for c in range(len(rig))], axis=0)
 
-        near = lags[k:k + _PERIOD_RUN]
-        run = int(np.argmin(np.r_[close[k:k + _PERIOD_RUN], False]))
-        best = near[int(np.nanargmin(worst(near[:max(run, 1)])))]
-        fine = best + np.arange(-_PERIOD_STEP_S, _PERIOD_STEP_S + _PERIOD_FINE_S / 2,
-                                _PERIOD_FINE_S)
-        return float(fine[np.nanargmin(worst(fine))])
-    return None
+    def share_at(c: int, at: np.ndarray, which: int) -> np.ndarray:
+        """(len(at),) camera ``c``'s close (0) or far (1) share at lags ``at``."""
+        return np.concatenate([shares(distances(c, at[s:s + chunk]))[which]
+                               for s in range(0, len(at), chunk)] or [np.zeros(0)])
+
+    # camera 1's track first, every lag (a count per lag: cheap); the track's movement on
+    # every tenth lag (a ball at rest repeats at any lag: the period must come after the
+    # first lag at which some camera's track has moved away); the other cameras only at the
+    # lags left
+    close = share_at(0, lags, 0) >= 0.75
+    if not close.any():
+        return None
+    coarse = lags[::10]
+    moved = np.zeros(len(coarse), dtype=bool)
+    for c in range(len(rig)):
+        moved |= share_at(c, coarse, 1) >= 0.75
+    if not moved.any():
+        return None
+    left = np.flatnonzero(close & (lags > coarse[np.argmax(moved)]))
+    for c in range(1, len(rig)):
+        left = left[share_at(c, lags[left], 0) >= 0.75]
+    if not len(left):
+        return None
+    k = int(left[0])
+
+    # the run of close lags from the first (the tolerance admits a few ms either side of
+    # the period: a ball at 500 px/s moves 3 px in 6 ms), its least median distance among
+    # every camera's, refined
+    def worst(trial: np.ndarray) -> np.ndarray:
+        with np.errstate(invalid="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            return np.max([np.nanmedian(distances(c, trial), axis=1)
+                           for c in range(len(rig))], axis=0)
+
+    near = lags[k:k + _PERIOD_RUN]
+    run = int(np.argmin(np.r_[close[k:k + _PERIOD_RUN], False]))
+    best = near[int(np.nanargmin(worst(near[:max(run, 1)])))]
+    fine = best + np.arange(-_PERIOD_STEP_S, _PERIOD_STEP_S + _PERIOD_FINE_S / 2,
+                            _PERIOD_FINE_S)
+    return float(fine[np.nanargmin(worst(fine))])
