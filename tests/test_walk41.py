@@ -181,3 +181,16 @@ def test_c3d_of_unevenly_spread_shutters_keeps_every_point(tmp_path):
         index = np.round((track.time_ns / 1e9 - first_s) * 90.0).astype(int)
         np.testing.assert_allclose(frames[index, j, :3], track.position_world * 1e3,
                                    atol=1e-3)
+
+
+def test_info_says_shutters_off_the_rigs_offsets_and_the_sync_command(tmp_path):
+    sim, synced = tmp_path / "s.mcap", tmp_path / "synced.mcap"
+    _ok("simulate", "--rig", "paper3", "--timing", "typeA", "--motion", "rally", "--duration",
+        "3", "--noise-px", "0.3", "--clock-offset", "cam2=3.4", "--seed", "65104", "-o", sim)
+    out = _ok("info", sim).stdout
+    # true = logged + offset: cam2's logged shutter 3.4 ms before its planned 11.111 ms
+    assert ("shutters off the rig's offsets (cam2 measured 7.711 ms, rig 11.111 ms): camera "
+            "clocks off, or the rig's offsets not the cameras'; 'pslog sync "
+            f"{sim} -o synced.mcap' estimates the clocks") in out, out
+    _ok("sync", sim, "-o", synced)
+    assert "shutters off" not in _ok("info", synced).stdout
