@@ -194,3 +194,14 @@ def test_info_says_shutters_off_the_rigs_offsets_and_the_sync_command(tmp_path):
             f"{sim} -o synced.mcap' estimates the clocks") in out, out
     _ok("sync", sim, "-o", synced)
     assert "shutters off" not in _ok("info", synced).stdout
+
+
+def test_c3d_of_a_regular_grid_near_k_times_the_frame_rate_keeps_its_rate(tmp_path):
+    """``smooth --rate 59`` on 30 fps cameras: 59 Hz is within 2 % of 2 x 30, but its points
+    keep to 59 Hz, not 60 (the snap is taken only where the points keep to it best)."""
+    sim, fused = tmp_path / "s.mcap", tmp_path / "f.mcap"
+    _ok("simulate", "--rig", "paper3", "--timing", "typeA", "--motion", "throw", "--seed",
+        "65106", "-o", sim)
+    _ok("fuse", sim, "--method", "smooth", "--rate", "59", "-o", fused)
+    done = _ok("export", fused, "--c3d", tmp_path / "t.c3d")
+    assert "frames at 59 Hz" in done.stdout and "left out" not in done.stdout, done.stdout

@@ -242,10 +242,12 @@ def c3d_grid(session) -> tuple[float, int, int]:
     the densest track, its gaps left out: :func:`_point_interval`); when its cameras share
     one frame rate and that is within :data:`SHUTTER_RATE_TOLERANCE` of a whole multiple k of
     it, k times the frame rate exactly (k shutter phases a frame: a mean from a few seconds
-    is 0.3 % off, enough to drift the grid off the points and put two on a frame); rounded
-    to 1e-6 Hz. Phase: the circular mean of the densest track's
-    times modulo the frame period (Mardia & Jupp, *Directional Statistics*, 2000, sec. 2.2),
-    so that its points sit at the frames' centres: exact for points on a regular shutter
+    is 0.3 % off, enough to drift the grid off the points and put two on a frame); of those
+    and 1 / the median interval, the one the points keep to best (:func:`_coherence`: a
+    ``smooth --rate 89`` grid stays 89 Hz); rounded to 1e-6 Hz. Phase: the circular mean
+    of the densest track's times modulo the frame period (Mardia & Jupp, *Directional
+    Statistics*, 2000, sec. 2.2), so that its points sit at the frames' centres: exact for
+    points on a regular shutter
     schedule such as type A's, and with jittered times (host stamps) the fewest points are
     half a period from their frame, where two fall on one. First frame: the one of that
     phase nearest the earliest point (at most half a period from it); every point is put on
@@ -258,13 +260,14 @@ def c3d_grid(session) -> tuple[float, int, int]:
         raise InputError(f"{session.path}: C3D needs a track of at least two points at "
                          f"different times to set its frame rate")
     interval, densest = min(spans, key=lambda s: s[0])
-    rate = NS / interval
+    rates = [NS / interval, NS / float(np.median(np.diff(densest.time_ns)))]
     fps = {cam.fps for cam in session.rig.cameras}
     if len(fps) == 1:  # the shutters' own rate: k shutter phases a frame period of the rig
-        k = round(rate / (frame_rate := fps.pop()))
-        if k >= 1 and abs(rate - k * frame_rate) <= SHUTTER_RATE_TOLERANCE * rate:
-            rate = k * frame_rate
-    rate = round(rate, 6)
+        k = round(rates[0] / (frame_rate := fps.pop()))
+        if k >= 1 and abs(rates[0] - k * frame_rate) <= SHUTTER_RATE_TOLERANCE * rates[0]:
+            rates.insert(0, k * frame_rate)
+    # the one whose frames the points keep to best (a grid of --rate 89 Hz is not 90's)
+    rate = round(max(rates, key=lambda r: _coherence(densest.time_ns, r)), 6)
     period = NS / rate
     earliest = min(int(t.time_ns.min()) for t in tracks.values() if len(t))
     last = max(int(t.time_ns.max()) for t in tracks.values() if len(t))
@@ -298,6 +301,14 @@ def _point_interval(time_ns: np.ndarray) -> float:
         return 0.0
     median = float(np.median(intervals))
     return float(np.mean(intervals[intervals <= GAP_INTERVAL * median]))
+
+
+def _coherence(time_ns: np.ndarray, rate: float) -> float:
+    """How well times keep to a grid of ``rate`` Hz: the mean resultant length of their
+    phases on it (1: all at one phase; a grid drifting off them over the session: near 0)."""
+    t = (np.asarray(time_ns, dtype=np.int64) - int(time_ns[0])).astype(np.float64)
+    phase = 2 * np.pi * np.mod(t * (rate / NS), 1.0)
+    return float(np.hypot(np.mean(np.cos(phase)), np.mean(np.sin(phase))))
 
 
 #: most frames a C3D file holds (its header's frame numbers are 16-bit in most readers)
