@@ -260,14 +260,15 @@ def c3d_grid(session) -> tuple[float, int, int]:
         raise InputError(f"{session.path}: C3D needs a track of at least two points at "
                          f"different times to set its frame rate")
     interval, densest = min(spans, key=lambda s: s[0])
-    rates = [NS / interval, NS / float(np.median(np.diff(densest.time_ns)))]
+    rates: list[float] = [NS / interval, NS / float(np.median(np.diff(densest.time_ns)))]
     fps = {cam.fps for cam in session.rig.cameras}
     if len(fps) == 1:  # the shutters' own rate: k shutter phases a frame period of the rig
         k = round(rates[0] / (frame_rate := fps.pop()))
         if k >= 1 and abs(rates[0] - k * frame_rate) <= SHUTTER_RATE_TOLERANCE * rates[0]:
-            rates.insert(0, k * frame_rate)
+            rates.insert(0, float(k * frame_rate))
     # the one whose frames the points keep to best (a grid of --rate 89 Hz is not 90's)
-    rate = round(max(rates, key=lambda r: _coherence(densest.time_ns, r)), 6)
+    coherence = [_coherence(densest.time_ns, r) for r in rates]
+    rate = round(rates[int(np.argmax(coherence))], 6)
     period = NS / rate
     earliest = min(int(t.time_ns.min()) for t in tracks.values() if len(t))
     last = max(int(t.time_ns.max()) for t in tracks.values() if len(t))
