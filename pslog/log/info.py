@@ -169,8 +169,11 @@ def camera_gaps(detections: Detections, rig, events=()) -> list[dict]:
     stretch, ``camera``, ``start_s`` (its last frame before, or the session's first frame),
     ``end_s`` (its first frame after, or the session's last frame), ``kind`` (``stopped``:
     none to the end, ``late``: none from the start, ``gap``), and ``note``: the first of
-    ``events`` (``(time_ns, text)``, the recorder's notes) within the stretch naming the
-    camera (``camera cam3 failed: camera process died``), else ``""``. A camera without
+    ``events`` (``(time_ns, text)``, the recorder's notes) within the stretch (or after its
+    start, for a camera that stopped) naming the
+    camera (``camera cam3 failed: camera process died``), else ``""`` (:func:`session_info`
+    adds ``imported``: the session is a CSV's, whose detector may write no row for a frame
+    without the ball, which :func:`gap_text` then says). A camera without
     any frame is one stretch over the whole session. Times on the logged session clock."""
     times = detections.frame_time_ns
     if not len(times):
@@ -188,7 +191,10 @@ def camera_gaps(detections: Detections, rig, events=()) -> list[dict]:
             if not len(t):
                 kind = "none"
             words = (f"camera {cam.name} ", f"{cam.name}:")
-            note = next((text for when, text in events if start <= when <= end
+            # a camera stopped: said after its last frame, maybe after the session's last
+            # (pslog live says a camera silent once a second has passed without it)
+            until = end if kind in ("gap", "late") else np.inf
+            note = next((text for when, text in events if start <= when <= until
                          and any(w in text for w in words)), "")
             gaps.append({"camera": cam.name, "start_s": start / NS, "end_s": end / NS,
                          "kind": kind, "note": note})
@@ -204,6 +210,10 @@ def gap_text(gap: dict, short: bool = False) -> str:
             "gap": f"from t = {start:.3f} to {end:.3f} s"}[gap["kind"]]
     if short:
         return f"{name}: no frame {span}"
+    if gap.get("imported"):  # a detector may write no row for a frame without the ball
+        return (f"{name}: no frame {span}, {end - start:.2f} s (no row in the imported "
+                f"CSV: a camera lost or late, frames dropped, or a detector writing no row "
+                f"for a frame without the ball)")
     why = {"stopped": "a camera that stopped or was unplugged",
            "late": "a camera that started late",
            "none": "a camera that never delivered",
@@ -409,7 +419,8 @@ def session_info(path) -> dict:
         "truth": session.truth is not None,
         "tracks": {m: len(t) for m, t in session.tracks.items()},
         "events": len(session.events),
-        "camera_gaps": camera_gaps(det, rig, session.events),
+        "camera_gaps": [{**gap, "imported": str(meta.get("source", "")).startswith(
+            "pslog import")} for gap in camera_gaps(det, rig, session.events)],
         "offsets_off": [{"camera": c["name"], "measured_s": c["offset_measured_s"],
                          "rig_s": c["offset_nominal_s"]} for c in cameras
                         if abs(c["offset_measured_s"] - c["offset_nominal_s"]) > OFFSET_NOTE_S],
