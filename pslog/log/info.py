@@ -168,7 +168,8 @@ def camera_gaps(detections: Detections, rig, events=()) -> list[dict]:
     :data:`GAP_NOTE_S` (or :data:`GAP_NOTE_PERIODS` of its frame periods): one dict per
     stretch, ``camera``, ``start_s`` (its last frame before, or the session's first frame),
     ``end_s`` (its first frame after, or the session's last frame), ``kind`` (``stopped``:
-    none to the end, ``late``: none from the start, ``gap``), and ``note``: the first of
+    none to the end, ``late``: none from the start, ``gap``, ``none``: no frame at all), and
+    ``note``: the first of
     ``events`` (``(time_ns, text)``, the recorder's notes) within the stretch (or after its
     start, for a camera that stopped) naming the
     camera (``camera cam3 failed: camera process died``), else ``""`` (:func:`session_info`
