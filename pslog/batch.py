@@ -807,7 +807,9 @@ def summary_row(session: str, info: dict | None, sync: dict | None, evaluation: 
     Columns: :data:`BASE_COLUMNS` (``duration_s`` in s, ``frames`` detected frames,
     ``detections`` candidates, ``runtime_s`` wall-clock s of the whole task), then per
     camera ``<camera>_offset_ms`` and ``_offset_std_ms`` (and the drift's and readout's when
-    ``estimate`` names them) of ``pslog sync``, then per
+    ``estimate`` names them) of ``pslog sync``, ``camera_gaps`` (the stretches a camera sent
+    no frame, ``pslog info``'s: ``cam3: no frame after t = 3.141 s (to the end, 5.996 s)``;
+    empty: none), then per
     method ``<method>_n_points``, the points it left out (:func:`left_out_columns`),
     ``_rate_hz`` and the errors against ground truth in mm (NaN without truth)."""
     row: dict = {"session": session, "status": "failed" if error else "ok", "error": error,
@@ -817,6 +819,11 @@ def summary_row(session: str, info: dict | None, sync: dict | None, evaluation: 
         row.update(cameras=" ".join(c["name"] for c in info.get("cameras", [])),
                    duration_s=info.get("duration_s", math.nan), frames=info.get("frames"),
                    detections=info.get("candidates"), truth=info.get("truth"))
+        from pslog.log.info import gap_text
+
+        # a camera unplugged halfway: an "ok" row said nothing of it (walk41)
+        row["camera_gaps"] = "; ".join(gap_text(g, short=True)
+                                       for g in info.get("camera_gaps", []))
     # what sync estimated: named by --estimate, or chosen by auto (sync's "estimated")
     wanted = {"offset", *estimate, *((sync or {}).get("estimated") or ())}
     for cam in (sync or {}).get("cameras", []):

@@ -37,6 +37,10 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+#: stretches without a frame listed per camera (the JSON has every one)
+GAPS_SHOWN = 3
+
+
 def _jsonable(value):
     """NaN (e.g. the rate of a camera without frames) becomes null: strict JSON."""
     if isinstance(value, float) and value != value:
@@ -119,6 +123,27 @@ def _text(info: dict) -> list[str]:
             lines.append(f"  {c['name']}: a candidate that does not move, at ({spot['u']:.1f}, "
                          f"{spot['v']:.1f}) px in {spot['share']:.1%} of its frames (a static "
                          f"object, or the ball at rest): not counted as moving")
+    from pslog.log.info import gap_text
+
+    # a camera unplugged halfway read as a plain 60.00 fps row with fewer frames (walk41)
+    gaps = info.get("camera_gaps", [])
+    for name in dict.fromkeys(g["camera"] for g in gaps):
+        mine = [g for g in gaps if g["camera"] == name]
+        lines += [f"  {gap_text(gap)}" for gap in mine[:GAPS_SHOWN]]
+        if len(mine) > GAPS_SHOWN:
+            more = len(mine) - GAPS_SHOWN
+            lines.append(f"  {name}: {more} more such stretch{'es' if more > 1 else ''} "
+                         f"('pslog info --json' lists them)")
+    off = info.get("offsets_off", [])
+    if off:
+        from pslog.errors import shell_word
+
+        said = ", ".join(f"{o['camera']} measured {o['measured_s'] * 1e3:.3f} ms, rig "
+                         f"{o['rig_s'] * 1e3:.3f} ms" for o in off)
+        fix = ("" if info["clock_corrected"] else
+               f"; 'pslog sync {shell_word(info['path'])} -o synced.mcap' estimates the clocks")
+        lines.append(f"  shutters off the rig's offsets ({said}): camera clocks off, or the "
+                     f"rig's offsets not the cameras'{fix}")
     if info["clock_corrected"]:
         lines.append("  clock model (true = logged + offset + drift * logged + readout * v / "
                      "height; applied when fusing):")

@@ -238,32 +238,46 @@ def write_parquet(session, path: str | Path, *, force: bool = False) -> int:
 def c3d_grid(session) -> tuple[float, int, int]:
     """The uniform frame grid of a session's C3D: ``(rate_hz, first_ns, n_frames)``.
 
-    Rates tried, lowest first: the highest point rate of the methods (1 / the median
-    interval between points of the densest track, rounded to 1e-6 Hz) and the multiples
-    ``k · fps`` (``k`` = 1 .. :data:`C3D_MULTIPLES`) of the fastest camera's frame rate
-    (session 41: two 60 fps cameras whose shutters are 4 and 12.7 ms apart have a median
-    interval of 78.8 Hz, on which 30 % of a track's points shared a frame and were left out;
-    240 Hz holds every one of them within 0.2 ms of its frame). The rate is the lowest that
-    keeps all but :data:`C3D_SHARED_SHARE` of the tracks' points on frames of their own,
-    with points on average within an eighth of a period of their frame (a jittered schedule
-    fits no finer grid: its points then spread over the frames) and at most
-    :data:`C3D_MAX_FRAMES` frames; where none does, the median interval's rate (points
-    sharing a frame are then left out and counted by :func:`write_c3d`).
+    Rate: the highest point rate of the methods (1 / the mean interval between points of
+    the densest track, its gaps left out: :func:`_point_interval`); when its cameras share
+    one frame rate and that is within :data:`SHUTTER_RATE_TOLERANCE` of a whole multiple k of
+    it, k times the frame rate exactly (k shutter phases a frame: a mean from a few seconds
+    is 0.3 % off, enough to drift the grid off the points and put two on a frame); of those
+    and 1 / the median interval, the one the points keep to best (:func:`_coherence`: a
+    ``smooth --rate 89`` grid stays 89 Hz); rounded to 1e-6 Hz. Phase: the circular mean
+    of the densest track's times modulo the frame period (Mardia & Jupp, *Directional
+    Statistics*, 2000, sec. 2.2), so that its points sit at the frames' centres: exact for
+    points on a regular shutter
+    schedule such as type A's, and with jittered times (host stamps) the fewest points are
+    half a period from their frame, where two fall on one. First frame: the one of that
+    phase nearest the earliest point (at most half a period from it); every point is put on
+    its nearest frame.
 
-    Phase, for each rate: the circular mean of the densest track's times modulo the frame
-    period (Mardia & Jupp, *Directional Statistics*, 2000, sec. 2.2), so that its points
-    sit at the frames' centres: exact for points on a regular shutter schedule such as type
-    A's, and with jittered times (host stamps) the fewest points are half a period from
-    their frame, where two fall on one. First frame: the one of that phase nearest the
-    earliest point (at most half a period from it); every point is put on its nearest frame.
+    Where that grid puts more than :data:`C3D_SHARED_SHARE` of the tracks' points on a frame
+    with another (left out), the multiples ``k · fps`` (``k`` = 1 .. :data:`C3D_MULTIPLES`)
+    of the cameras' frame rates are tried (session 41: two 60 fps cameras 4 ms apart, the
+    ball missed in a fifth of the frames: the mean's and the median's rates, 79-105 Hz,
+    left out 30 % of a track; 240 Hz holds every point within 0.1 ms of its frame): the
+    lowest that leaves out as few points as any (within that share) and that the densest
+    track keeps to (:func:`_coherence` at least :data:`C3D_COHERENT`: a jittered schedule
+    keeps to no finer grid, and stays on the first), within :data:`C3D_MAX_FRAMES` frames.
     """
     tracks = _tracks(session)
-    spans = [(float(np.median(np.diff(t.time_ns))), t) for t in tracks.values() if len(t) > 1]
+    spans = [(_point_interval(t.time_ns), t) for t in tracks.values() if len(t) > 1]
     spans = [(d, t) for d, t in spans if d > 0]
     if not spans:
         raise InputError(f"{session.path}: C3D needs a track of at least two points at "
                          f"different times to set its frame rate")
     interval, densest = min(spans, key=lambda s: s[0])
+    rates: list[float] = [NS / interval, NS / float(np.median(np.diff(densest.time_ns)))]
+    fps = {cam.fps for cam in session.rig.cameras}
+    if len(fps) == 1:  # the shutters' own rate: k shutter phases a frame period of the rig
+        k = round(rates[0] / (frame_rate := fps.pop()))
+        if k >= 1 and abs(rates[0] - k * frame_rate) <= SHUTTER_RATE_TOLERANCE * rates[0]:
+            rates.insert(0, float(k * frame_rate))
+    # the one whose frames the points keep to best (a grid of --rate 89 Hz is not 90's)
+    coherence = [_coherence(densest.time_ns, r) for r in rates]
+    rate = round(rates[int(np.argmax(coherence))], 6)
     earliest = min(int(t.time_ns.min()) for t in tracks.values() if len(t))
     last = max(int(t.time_ns.max()) for t in tracks.values() if len(t))
 
@@ -274,32 +288,65 @@ def c3d_grid(session) -> tuple[float, int, int]:
         first = earliest + round(phase)  # |phase| <= period / 2: frame 0 is the earliest's
         return rate, first, round((last - first) * rate / NS) + 1
 
-    median_rate = round(NS / interval, 6)
-    used = {int(c) for t in tracks.values() for c in np.unique(t.camera)}
-    fps = max((cam.fps for i, cam in enumerate(session.rig.cameras) if i in used),
-              default=0.0) if session.rig is not None else 0.0
-    rates = sorted({median_rate, *(round(k * fps, 6) for k in range(1, C3D_MULTIPLES + 1)
-                                   if fps > 0)})
+    def left_out(rate: float, first: int) -> int:
+        """The tracks' points sharing a frame with another on the grid."""
+        return sum(len(t) - len(np.unique(np.round((t.time_ns - first) * rate / NS)))
+                   for t in tracks.values())
+
+    chosen = grid(rate)
     total = sum(len(t) for t in tracks.values())
-    for rate in rates:
-        rate, first, n_frames = grid(rate)
-        if n_frames > C3D_MAX_FRAMES:
-            break  # (higher rates hold more frames still)
-        shared, off = 0, 0.0
-        for track in tracks.values():
-            at = (track.time_ns - first) * rate / NS
-            frames = np.round(at)
-            shared += len(track) - len(np.unique(frames))
-            off += float(np.abs(at - frames).sum())
-        if shared <= C3D_SHARED_SHARE * total and off <= total / 8:
-            return rate, first, n_frames
-    return grid(median_rate)
+    if left_out(rate, chosen[1]) <= C3D_SHARED_SHARE * total:
+        return chosen
+    # points left out: the multiples of the cameras' frame rates, lowest first
+    trials = sorted({round(k * f, 6) for f in {cam.fps for cam in session.rig.cameras}
+                     for k in range(1, C3D_MULTIPLES + 1)})
+    found = [(r, first, n) for r, first, n in map(grid, trials) if n <= C3D_MAX_FRAMES]
+    lost = [left_out(r, first) for r, first, _n in found]
+    least = min(lost, default=total)
+    for (r, first, n), k in zip(found, lost, strict=True):
+        if k <= least + C3D_SHARED_SHARE * total and k < left_out(rate, chosen[1]) and (
+                _coherence(densest.time_ns, r) >= C3D_COHERENT):
+            return r, first, n
+    return chosen
 
 
-#: the multiples of the fastest camera's frame rate :func:`c3d_grid` tries
+#: a point rate this close (relative) to k times the cameras' frame rate is k shutters a frame
+SHUTTER_RATE_TOLERANCE = 0.02
+#: the multiples of the cameras' frame rates :func:`c3d_grid` tries where points are left out
 C3D_MULTIPLES = 8
-#: the share of points :func:`c3d_grid` lets share a frame (left out) on a grid it chooses
+#: the share of the points :func:`c3d_grid` lets share a frame (left out) on the grid it keeps
 C3D_SHARED_SHARE = 1e-3
+#: the least :func:`_coherence` of the densest track with a finer grid :func:`c3d_grid` takes
+C3D_COHERENT = 0.9
+#: intervals longer than this many times the median are gaps (a missed detection), not the
+#: schedule's own: left out of :func:`_point_interval`'s mean
+GAP_INTERVAL = 1.5
+
+
+def _point_interval(time_ns: np.ndarray) -> float:
+    """A track's mean interval between points, ns: the mean of its intervals up to
+    :data:`GAP_INTERVAL` times their median (a missed detection's longer one left out).
+
+    Not the median itself: shutters spread unevenly over the frame period (4 x 60 fps at
+    0 / 2.9 / 7.4 / 12.6 ms: intervals 2.9, 4.5, 5.2, 4.1 ms) have a median interval (4.3
+    ms, 232 Hz) longer than their mean (4.17 ms, 240 Hz, the rate their points come at), and
+    a grid at the median's rate has fewer frames than points: walk41's C3D left out 12 % of
+    every method's points, "sharing a frame". For evenly spread shutters (type A), jittered
+    or not, both are the same period."""
+    intervals = np.diff(np.asarray(time_ns, dtype=np.int64)).astype(np.float64)
+    intervals = intervals[intervals > 0]
+    if not len(intervals):
+        return 0.0
+    median = float(np.median(intervals))
+    return float(np.mean(intervals[intervals <= GAP_INTERVAL * median]))
+
+
+def _coherence(time_ns: np.ndarray, rate: float) -> float:
+    """How well times keep to a grid of ``rate`` Hz: the mean resultant length of their
+    phases on it (1: all at one phase; a grid drifting off them over the session: near 0)."""
+    t = (np.asarray(time_ns, dtype=np.int64) - int(time_ns[0])).astype(np.float64)
+    phase = 2 * np.pi * np.mod(t * (rate / NS), 1.0)
+    return float(np.hypot(np.mean(np.cos(phase)), np.mean(np.sin(phase))))
 
 
 #: most frames a C3D file holds (its header's frame numbers are 16-bit in most readers)

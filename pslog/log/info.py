@@ -156,6 +156,75 @@ def offset_disagreements(detections: Detections, rig) -> list[tuple[str, float, 
             and abs(row["offset_measured_s"] - offset) > OFFSET_NOTE_S]
 
 
+#: a camera without a frame for longer than this while the session runs is worth telling,
+#: seconds (or :data:`GAP_NOTE_PERIODS` frame periods, if longer): a camera unplugged or
+#: whose process died; frames dropped under load are single frames
+GAP_NOTE_S = 0.5
+GAP_NOTE_PERIODS = 10
+
+
+def camera_gaps(detections: Detections, rig, events=()) -> list[dict]:
+    """The stretches of the session during which a camera sent no frame, longer than
+    :data:`GAP_NOTE_S` (or :data:`GAP_NOTE_PERIODS` of its frame periods): one dict per
+    stretch, ``camera``, ``start_s`` (its last frame before, or the session's first frame),
+    ``end_s`` (its first frame after, or the session's last frame), ``kind`` (``stopped``:
+    none to the end, ``late``: none from the start, ``gap``, ``none``: no frame at all), and
+    ``note``: the first of
+    ``events`` (``(time_ns, text)``, the recorder's notes) within the stretch (or after its
+    start, for a camera that stopped) naming the
+    camera (``camera cam3 failed: camera process died``), else ``""`` (:func:`session_info`
+    adds ``imported``: the session is a CSV's, whose detector may write no row for a frame
+    without the ball, which :func:`gap_text` then says). A camera without
+    any frame is one stretch over the whole session. Times on the logged session clock."""
+    times = detections.frame_time_ns
+    if not len(times):
+        return []
+    first, last = int(times.min()), int(times.max())
+    gaps = []
+    for i, cam in enumerate(rig.cameras):
+        t = np.sort(times[detections.frame_camera == i])
+        limit = max(GAP_NOTE_S, GAP_NOTE_PERIODS / cam.fps) * NS
+        edges = np.concatenate(([first], t, [last]))
+        for k in np.flatnonzero(np.diff(edges) > limit):
+            start, end = int(edges[k]), int(edges[k + 1])
+            kind = ("gap" if 0 < k < len(edges) - 2 else "stopped" if k == len(edges) - 2
+                    else "late")
+            if not len(t):
+                kind = "none"
+            words = (f"camera {cam.name} ", f"{cam.name}:")
+            # a camera stopped: said after its last frame, maybe after the session's last
+            # (pslog live says a camera silent once a second has passed without it)
+            until = end if kind in ("gap", "late") else np.inf
+            note = next((text for when, text in events if start <= when <= until
+                         and any(w in text for w in words)), "")
+            gaps.append({"camera": cam.name, "start_s": start / NS, "end_s": end / NS,
+                         "kind": kind, "note": note})
+    return gaps
+
+
+def gap_text(gap: dict, short: bool = False) -> str:
+    """One of :func:`camera_gaps`'s stretches in words (``short``: for a table's cell)."""
+    name, start, end = gap["camera"], gap["start_s"], gap["end_s"]
+    span = {"stopped": f"after t = {start:.3f} s (to the end, {end:.3f} s)",
+            "late": f"before t = {end:.3f} s (from the start, {start:.3f} s)",
+            "none": "at all",
+            "gap": f"from t = {start:.3f} to {end:.3f} s"}[gap["kind"]]
+    if short:
+        return f"{name}: no frame {span}"
+    if gap.get("imported"):  # a detector may write no row for a frame without the ball
+        return (f"{name}: no frame {span}, {end - start:.2f} s (no row in the imported "
+                f"CSV: a camera lost or late, frames dropped, or a detector writing no row "
+                f"for a frame without the ball)")
+    why = {"stopped": "a camera that stopped or was unplugged",
+           "late": "a camera that started late",
+           "none": "a camera that never delivered",
+           "gap": "a camera lost for a while, or its frames dropped"}[gap["kind"]]
+    text = f"{name}: no frame {span}, {end - start:.2f} s ({why})"
+    if gap["note"]:
+        text += f"; the recorder's note: {gap['note']}"
+    return text
+
+
 #: a spot holding a candidate in at least this share of a camera's frames is static
 STATIC_SHARE = 0.5
 #: ... and in at least this many of them (a few frames prove nothing)
@@ -261,7 +330,10 @@ def session_info(path) -> dict:
     origin on the original clock, 0 if none), ``topics`` (message counts), ``duration_s``,
     ``start_s``, ``end_s``, ``truth``, ``tables`` (columnar table -> ``ok`` or
     ``unusable: <reason>``, when the messages are read instead: :mod:`pslog.log.table`),
-    ``tracks`` (method -> points), ``events``, metadata fields, ``truncated: False`` and
+    ``tracks`` (method -> points), ``events``, ``camera_gaps`` (the stretches a camera sent
+    no frame: :func:`camera_gaps`), ``offsets_off`` (cameras whose measured shutter offset
+    is more than :data:`OFFSET_NOTE_S` from the rig's: :func:`offset_disagreements`),
+    metadata fields, ``truncated: False`` and
     ``damaged`` (every chunk is checked: one dict per damaged chunk, see
     :func:`pslog.log.recover.describe_damage`; the rest of the summary leaves them out).
     On a truncated file, or one whose summary is damaged: ``truncated: True``, what is
@@ -348,6 +420,11 @@ def session_info(path) -> dict:
         "truth": session.truth is not None,
         "tracks": {m: len(t) for m, t in session.tracks.items()},
         "events": len(session.events),
+        "camera_gaps": [{**gap, "imported": str(meta.get("source", "")).startswith(
+            "pslog import")} for gap in camera_gaps(det, rig, session.events)],
+        "offsets_off": [{"camera": c["name"], "measured_s": c["offset_measured_s"],
+                         "rig_s": c["offset_nominal_s"]} for c in cameras
+                        if abs(c["offset_measured_s"] - c["offset_nominal_s"]) > OFFSET_NOTE_S],
         "file_bytes": size,
         "tables": tables,
         "damaged": damaged,
