@@ -1,0 +1,117 @@
+"""Session 41's hostile-input sweep (helper hostile41), through the real CLI on real files:
+``pslog import --columns``, damaged sessions and fused files (cut or flipped at random
+offsets: benchmarks/session41/hostile/damage.py), ``pslog live`` and ``pslog batch``.
+
+Found and fixed (``--columns``): a column given with a newline, or a header cell holding one
+(CSV quotes allow it), printed the error on two lines; a header whose accented name was
+written decomposed (NFD: macOS, some editors) was not found by the same name typed composed,
+and the error showed two identical names; a column whose name holds a comma could not be
+named at all (now ``time="t,unix"``, as CSV quotes it); a mapping onto a name the header
+already has (``time=t_unix`` over ``camera,time,t_unix,u,v``), or of a column the header
+holds twice, said only "bad header 'camera,time,time,u,v'", a header the file does not
+have."""
+
+from __future__ import annotations
+
+import unicodedata
+from pathlib import Path
+
+import pytest
+
+import pslog
+
+from .promises import assert_one_line_error, assert_untouched, fingerprint, run_pslog
+
+
+@pytest.fixture(scope="module")
+def inputs(tmp_path_factory) -> Path:
+    folder = tmp_path_factory.mktemp("sweep41")
+    done = run_pslog("simulate", "--rig", "paper3", "--timing", "typeA", "--motion", "throw",
+                     "--noise-px", "0.3", "--seed", "66001", "-o", folder / "s.mcap")
+    assert done.code == 0, done.stderr
+    done = run_pslog("export", folder / "s.mcap", "--detections", folder / "det.csv")
+    assert done.code == 0, done.stderr
+    return folder
+
+
+def _lab_csv(inputs: Path, out: Path, header: str) -> Path:
+    """det.csv (``camera,time,u,v,frame,score``) under another header of as many cells (a
+    CSV header: quoted cells may hold commas and newlines), its rows cut to that many."""
+    import csv
+    import io
+
+    width = len(next(csv.reader(io.StringIO(header))))
+    rows = (inputs / "det.csv").read_text().splitlines()[1:]
+    out.write_text(header + "\n" + "\n".join(",".join(r.split(",")[:width]) for r in rows)
+                   + "\n", encoding="utf-8")
+    return out
+
+
+def _import(inputs: Path, tmp_path: Path, csv_file: Path, columns: str):
+    return run_pslog("import", "--rig", "paper3", "--detections", csv_file, "--columns",
+                     columns, "-o", tmp_path / "out.mcap", "--force")
+
+
+def _same_detections(a: Path, b: Path) -> None:
+    import numpy as np
+
+    x, y = pslog.read_session(a).detections, pslog.read_session(b).detections
+    np.testing.assert_array_equal(x.frame_time_ns, y.frame_time_ns)
+    np.testing.assert_array_equal(x.cand_uv, y.cand_uv)
+
+
+@pytest.mark.parametrize("where", ["argument", "header"])
+def test_a_newline_in_a_column_name_stays_on_one_line(inputs, tmp_path, where):
+    """``--columns 'time=t<newline>unix'`` (a pasted name) against a file without it, or a
+    header cell ``"t<newline>unix"`` named by the error: the line was cut in two."""
+    header = 'cam,"t\nunix",px,py' if where == "header" else "cam,t_unix,px,py"
+    lab = _lab_csv(inputs, tmp_path / "lab.csv", header)
+    before = fingerprint(tmp_path)
+    run = _import(inputs, tmp_path, lab, "camera=cam,time=t\nunix2,u=px,v=py"
+                  if where == "argument" else "camera=cam,time=t_unix,u=px,v=py")
+    assert_one_line_error(run, 1, contains=(
+        "no column 't\\nunix2'" if where == "argument" else "'t\\nunix'"))
+    assert_untouched(before, tmp_path)
+
+
+def test_a_decomposed_accent_is_the_same_column(inputs, tmp_path):
+    """A header written in Unicode's decomposed form (``é`` as ``e`` + U+0301) and the same
+    name typed composed: refused as 'no column 'témps'; the header has ... témps'."""
+    header = unicodedata.normalize("NFD", "kaméra,témps,ü,v")
+    assert header != unicodedata.normalize("NFC", header)
+    lab = _lab_csv(inputs, tmp_path / "lab.csv", header)
+    run = _import(inputs, tmp_path, lab, unicodedata.normalize(
+        "NFC", "camera=kaméra,time=témps,u=ü,v=v"))
+    assert run.code == 0, run.stderr
+    plain = _lab_csv(inputs, tmp_path / "plain.csv", "camera,time,u,v")
+    done = run_pslog("import", "--rig", "paper3", "--detections", plain, "-o",
+                     tmp_path / "plain.mcap")
+    assert done.code == 0, done.stderr
+    _same_detections(tmp_path / "out.mcap", tmp_path / "plain.mcap")
+
+
+def test_a_column_name_holding_a_comma_is_named_in_quotes(inputs, tmp_path):
+    """A header cell ``"t,unix"`` (quoted in the CSV) could not be mapped: the comma split
+    ``--columns`` ('unix' is not NAME=COLUMN); quoted as CSV quotes it, it is one column,
+    and the unquoted form's error says how."""
+    lab = _lab_csv(inputs, tmp_path / "lab.csv", 'camera,"t,unix",u,v')
+    run = _import(inputs, tmp_path, lab, 'time=t,unix')
+    assert_one_line_error(run, 2, contains='quote it, time=t,unix as time="t,unix"')
+    run = _import(inputs, tmp_path, lab, 'time="t,unix",u=u')
+    assert run.code == 0, run.stderr
+    run = _import(inputs, tmp_path, lab, 'time="t,unix')
+    assert_one_line_error(run, 2, contains="unmatched double quote")
+
+
+@pytest.mark.parametrize("header, said", [
+    ("camera,time,t_unix,u,v", "--columns time=t_unix reads 't_unix' as time, but the "
+                               "header has a column time too"),
+    ("camera,t_unix,t_unix,u,v", "column 't_unix' (--columns time=...) is in the header 2 "
+                                 "times")])
+def test_a_mapping_that_makes_a_column_twice_is_named(inputs, tmp_path, header, said):
+    """The error showed the mapped header, 'bad header 'camera,time,time,u,v'', a header the
+    file does not have, without saying which column came twice or why."""
+    lab = _lab_csv(inputs, tmp_path / "lab.csv", header)
+    before = fingerprint(tmp_path)
+    assert_one_line_error(_import(inputs, tmp_path, lab, "time=t_unix"), 1, contains=said)
+    assert_untouched(before, tmp_path)
