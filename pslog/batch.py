@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import fnmatch
 import glob
 import hashlib
 import io
@@ -166,6 +167,76 @@ def _glob_root(pattern: str) -> Path:
     return Path(pattern).parent
 
 
+def _glob_files(pattern: str) -> list[str]:
+    """The files ``glob.glob(pattern, recursive=True)`` matches, sorted, but with each
+    folder that a ``**`` reaches more than once (through a symbolic link to a folder above
+    it: a loop) walked once: two such links in one folder made glob walk 2^40 paths (the
+    depth at which the kernel refuses to follow links), and ``pslog batch 'd/**/*.mcap'``
+    hung (sweep41). The same rules as glob otherwise: links to folders followed, names
+    starting with '.' matched only by a pattern that starts with one, ``**`` not into
+    hidden folders, unreadable folders passed over."""
+    if "**" not in pattern:  # (each component walks each folder once: no loop to fear)
+        return sorted(p for p in glob.glob(pattern, recursive=True) if os.path.isfile(p))
+    parts = pattern.split(os.sep)
+    first = next(i for i, part in enumerate(parts) if glob.has_magic(part))
+    prefix = os.sep.join(parts[:first]) if first else ""
+    if first == 1 and not parts[0]:  # (an absolute pattern: '/**/...')
+        prefix = os.sep
+    found: set[str] = set()
+    chain: list[tuple[int, int, int]] = []  # (component, device, inode) of the folders above
+
+    def names(folder: str, hidden: bool) -> list[tuple[str, bool]]:
+        try:
+            with os.scandir(folder or ".") as it:
+                out = []
+                for entry in it:
+                    if entry.name.startswith(".") and not hidden:
+                        continue
+                    try:
+                        is_dir = entry.is_dir()  # (follows links, as glob does)
+                    except OSError:
+                        is_dir = False
+                    out.append((entry.name, is_dir))
+                return out
+        except OSError:
+            return []
+
+    def walk(folder: str, k: int) -> None:
+        if k == len(parts):
+            if os.path.isfile(folder):
+                found.add(folder)
+            return
+        part = parts[k]
+        if part == "**":
+            try:
+                st = os.stat(folder or ".")
+            except OSError:
+                return
+            key = (k, st.st_dev, st.st_ino)
+            if key in chain:  # (a folder inside itself: a loop, walked once)
+                return
+            chain.append(key)
+            walk(folder, k + 1)  # (no folder)
+            for name, is_dir in names(folder, hidden=False):
+                if is_dir:
+                    walk(os.path.join(folder, name), k)
+                elif k + 1 == len(parts):  # (a trailing '**' matches files too)
+                    walk(os.path.join(folder, name), k + 1)
+            chain.pop()
+            return
+        if not glob.has_magic(part):
+            path = os.path.join(folder, part)
+            if os.path.lexists(path):
+                walk(path, k + 1)
+            return
+        for name, is_dir in names(folder, hidden=part.startswith(".")):
+            if fnmatch.fnmatchcase(name, part) and (is_dir or k + 1 == len(parts)):
+                walk(os.path.join(folder, name), k + 1)
+
+    walk(prefix, first)
+    return sorted(found)
+
+
 def _holds_results(folder: Path, cache: dict[Path, bool]) -> bool:
     """Whether ``folder`` holds a batch's results: a ``summary.csv`` whose header is
     pslog's, or a ``done.json`` marker."""
@@ -208,7 +279,7 @@ def find_sessions(patterns: Iterable[str], outdir: str | Path,
     cache: dict[Path, bool] = {}
     for pattern in patterns:
         root = _glob_root(pattern).resolve()
-        matched = sorted(p for p in glob.glob(pattern, recursive=True) if os.path.isfile(p))
+        matched = _glob_files(pattern)
         found = [p for p in matched if not Path(p).resolve().is_relative_to(out)]
         if matched and not found:
             raise InputError(f"every match of {pattern!r} lies inside -o {outdir} (the "
@@ -220,7 +291,7 @@ def find_sessions(patterns: Iterable[str], outdir: str | Path,
         if not found and not matched and os.path.isdir(pattern):
             # a folder is no pattern of its files: say which pattern is (quoted, as pasted)
             inside = os.path.join(glob.escape(pattern), "**", "*.mcap")
-            n = len([p for p in glob.glob(inside, recursive=True) if os.path.isfile(p)])
+            n = len(_glob_files(inside))
             suggested = shell_word(inside)
             raise InputError(f"{pattern} is a folder, not a session file: give its sessions "
                              f"as the quoted pattern {suggested} ({n} .mcap file"

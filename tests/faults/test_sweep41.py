@@ -115,3 +115,42 @@ def test_a_mapping_that_makes_a_column_twice_is_named(inputs, tmp_path, header, 
     before = fingerprint(tmp_path)
     assert_one_line_error(_import(inputs, tmp_path, lab, "time=t_unix"), 1, contains=said)
     assert_untouched(before, tmp_path)
+
+
+def _looped_folder(tmp_path: Path, inputs: Path) -> Path:
+    """A folder of one session and two symbolic links to itself (``ln -s . again``: a
+    folder a user links into its own tree for a shorter path, twice)."""
+    import shutil
+
+    folder = tmp_path / "season"
+    folder.mkdir()
+    shutil.copyfile(inputs / "s.mcap", folder / "m1.mcap")
+    (folder / "again").symlink_to(".")
+    (folder / "also").symlink_to(".")
+    return folder
+
+
+def test_a_batch_over_a_folder_linked_into_itself_runs_each_session_once(inputs, tmp_path):
+    """``pslog batch 'season/**/*.mcap'`` with two links to '.' in season/: glob's ``**``
+    follows links, so it walked 2^40 paths (the kernel's depth of links): the batch hung
+    before planning anything (SIGTERM after 40 s: nothing done). Each folder inside itself
+    is now walked once: the one session is fused, once."""
+    folder = _looped_folder(tmp_path, inputs)
+    pytest.importorskip("ray")
+    run = run_pslog("batch", f"{folder}/**/*.mcap", "--do", "fuse", "-o", tmp_path / "out",
+                    timeout=20)
+    assert run.code == 0, run.stderr
+    rows = (tmp_path / "out" / "summary.csv").read_text().splitlines()
+    assert len(rows) == 2 and rows[1].startswith("m1.mcap,ok"), rows
+    assert (tmp_path / "out" / "m1" / "fused.mcap").is_file()
+
+
+def test_a_folder_linked_into_itself_given_as_the_pattern_is_counted(inputs, tmp_path):
+    """The folder itself as the pattern: its sessions counted for the message by the same
+    ``**`` walk, which hung as the batch did."""
+    folder = _looped_folder(tmp_path, inputs)
+    before = fingerprint(tmp_path)
+    run = run_pslog("batch", folder, "--do", "fuse", "-o", tmp_path / "out", timeout=20)
+    assert_one_line_error(run, 1, contains=("is a folder, not a session file",
+                                            "(1 .mcap file there"))
+    assert_untouched(before, tmp_path)
