@@ -63,7 +63,7 @@ from .protocol import (
 
 #: The counters of :meth:`LiveFuser.counters`, in order.
 COUNTERS = ("received", "fused", "duplicate", "reordered", "late", "future", *REASONS,
-            "unknown_camera", "fusion_error", "lost", "points")
+            "unknown_camera", "fusion_error", "lost", "overflow", "points")
 #: Sequences remembered per camera for the duplicate test.
 _SEEN = 4096
 #: Frames remembered per camera to find the arrival time behind a point.
@@ -667,8 +667,15 @@ class LiveFuser:
         """Datagrams ``received``; frames ``fused``; dropped by reason (``duplicate``,
         ``reordered``, ``late``, ``truncated``, ``oversize``, ``foreign``, ``version``,
         ``malformed``, ``unknown_camera``, ``fusion_error``); frames ``lost`` on the way
-        (sequence gaps); ``points`` emitted."""
+        (sequence gaps); datagrams the socket's receive buffer had no room for, discarded by
+        the kernel before the fuser could read them (``overflow``: :meth:`socket_overflow`,
+        a flood); ``points`` emitted."""
         return dict(self._counts)
+
+    def socket_overflow(self, total: int) -> None:
+        """The kernel's count of datagrams its socket dropped for want of room (Linux
+        ``SO_RXQ_OVFL``, from the start), as the server reads it beside a datagram."""
+        self._counts["overflow"] = int(total)
 
     def cameras(self, now_ns: int | None = None) -> list[CameraLiveState]:
         """Each camera's state, ``silent`` updated to ``now_ns`` (on :attr:`monotonic`'s

@@ -20,7 +20,7 @@ import pytest
 
 import pslog
 
-from .promises import assert_one_line_error, assert_untouched, fingerprint, run_pslog
+from .promises import HANG_S, assert_one_line_error, assert_untouched, fingerprint, run_pslog
 
 
 @pytest.fixture(scope="module")
@@ -154,3 +154,53 @@ def test_a_folder_linked_into_itself_given_as_the_pattern_is_counted(inputs, tmp
     assert_one_line_error(run, 1, contains=("is a folder, not a session file",
                                             "(1 .mcap file there"))
     assert_untouched(before, tmp_path)
+
+
+def test_datagrams_a_flood_makes_the_kernel_drop_are_counted(tmp_path):
+    """A flood while the fuser is stopped (SIGSTOP: a fuser busy elsewhere, a burst larger
+    than its socket's buffer): the kernel dropped what the buffer had no room for, and
+    ``pslog live`` said nothing of it (a hostile probe: 60,000 sent, 22,626 received, drops
+    listed for those alone). Linux counts them beside each datagram (SO_RXQ_OVFL): the
+    status says ``overflow N``, and every datagram sent is received or counted."""
+    import re
+    import signal
+    import socket
+    import subprocess
+    import sys
+    import time
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    proc = subprocess.Popen([sys.executable, "-m", "pslog.cli", "live", "--rig", "paper3",
+                             "--listen", f"udp://127.0.0.1:{port}", "--status-every", "0.2"],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    try:
+        line = proc.stderr.readline()  # 'listening for detection datagrams on ...'
+        assert "listening" in line, line
+        proc.send_signal(signal.SIGSTOP)
+        sent = 0
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx:
+            for _ in range(20_000):  # 40 MB: ten times the 4 MB buffer the kernel grants
+                tx.sendto(b"NOPE" + bytes(2000), ("127.0.0.1", port))
+                sent += 1
+            proc.send_signal(signal.SIGCONT)
+            time.sleep(1.0)  # (the buffer read)
+            # the kernel's count comes with the next datagram it queues
+            tx.sendto(b"NOPE" + bytes(2000), ("127.0.0.1", port))
+            sent += 1
+            time.sleep(0.5)
+        proc.send_signal(signal.SIGINT)
+        err = proc.stderr.read()
+        assert proc.wait(HANG_S) == 0, err
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert "Traceback" not in err, err
+    final = [x for x in err.splitlines() if x.startswith("live ")][-1]
+    assert "overflow" in final, final
+    received = int(re.search(r"datagrams (\d+)", final).group(1))
+    overflow = int(re.search(r"overflow (\d+)", final).group(1))
+    assert 0 < received < sent and received + overflow == sent, final
+    assert f"foreign {received}" in final, final
