@@ -197,16 +197,18 @@ def parse_columns(text: str) -> dict[str, str]:
     column given twice."""
     out: dict[str, str] = {}
     named: set[str] = set()
-    items, item, quoted = [], [], False
+    items: list[str] = []
+    chars: list[str] = []
+    quoted = False
     for char in text:  # (commas inside double quotes belong to a column's name)
         if char == '"':
             quoted = not quoted
         if char == "," and not quoted:
-            items.append("".join(item))
-            item = []
+            items.append("".join(chars))
+            chars = []
         else:
-            item.append(char)
-    items.append("".join(item))
+            chars.append(char)
+    items.append("".join(chars))
     if quoted:
         raise InputError(f"--columns: {_shown(text)} has an unmatched double quote (quote a "
                          f"column whole: time=\"t,unix\")")
