@@ -204,3 +204,32 @@ def test_datagrams_a_flood_makes_the_kernel_drop_are_counted(tmp_path):
     overflow = int(re.search(r"overflow (\d+)", final).group(1))
     assert 0 < received < sent and received + overflow == sent, final
     assert f"foreign {received}" in final, final
+
+
+def test_matches_that_are_no_session_file_are_named(inputs, tmp_path):
+    """A session behind a link to a disk not mounted, a FIFO, a folder named like a session:
+    the batch left them out without a word (its summary one session short, exit 0); a
+    pattern of such a match alone said 'no session file matches', not why."""
+    import os
+    import shutil
+
+    folder = tmp_path / "season"
+    folder.mkdir()
+    shutil.copyfile(inputs / "s.mcap", folder / "m1.mcap")
+    (folder / "m2.mcap").symlink_to("/nonexistent/disk/m2.mcap")
+    os.mkfifo(folder / "m3.mcap")
+    (folder / "m4.mcap").mkdir()
+    pytest.importorskip("ray")
+    run = run_pslog("batch", f"{folder}/*.mcap", "--do", "fuse", "-o", tmp_path / "out")
+    assert run.code == 0, run.stderr
+    assert "Traceback" not in run.stderr
+    note = [x for x in run.stderr.splitlines() if "no session file" in x]
+    assert note and note[0].startswith("pslog batch: note: 3 matches of the patterns are no "
+                                       "session file, left out:"), run.stderr
+    for said in ("m2.mcap (a link to a missing file)", "m3.mcap (a FIFO)",
+                 "m4.mcap (a folder)"):
+        assert said in note[0], note
+    before = fingerprint(folder)
+    run = run_pslog("batch", folder / "m2.mcap", "--do", "fuse", "-o", tmp_path / "out2")
+    assert_one_line_error(run, 1, contains="m2.mcap (a link to a missing file)")
+    assert_untouched(before, folder)
