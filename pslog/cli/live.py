@@ -290,6 +290,7 @@ def _run(args: argparse.Namespace, stop) -> int:
         _say(f"{summary.counters.get('points', len(lat))} points; fusion latency (datagram "
              f"arrival to point out) median {np.median(lat) / 1e3:.0f} us, p99 "
              f"{np.percentile(lat, 99) / 1e3:.0f} us{on_cpu}")
+    _say_refused(sinks)
     no_camera = cameras is not None and cameras.all_failed
     if recording is not None:
         if recording.empty:
@@ -302,6 +303,22 @@ def _run(args: argparse.Namespace, stop) -> int:
         failed = "; ".join(f"{c.name}: {c.message}" for c in cameras.cameras)
         raise InputError(f"no camera could be opened ({failed})")
     return 0
+
+
+def _say_refused(sinks) -> None:
+    """A note when point datagrams to --out were refused (the system said nothing listened
+    there: the robot not started, or gone): counted by the sink, they were said nowhere
+    (sweep41: a receiver closed mid-run, the run ended as if every point had reached it).
+    A count from below: after the port's refusal each send that finds it closed again is
+    refused, the others leave and are lost unseen."""
+    from pslog.live.sinks import UdpSink
+
+    for sink in sinks:
+        if isinstance(sink, UdpSink) and sink.errors:
+            n = sink.sent + sink.errors
+            _say(f"note: --out {_udp_text(sink.destination[:2])}: {sink.errors} of {n} point datagram"
+                 f"{'s' if n != 1 else ''} refused (nothing listened there at times: the "
+                 f"receiver not started, or gone; more may have been lost unseen)")
 
 
 def _recording_failed(recording, exc: BaseException) -> bool:

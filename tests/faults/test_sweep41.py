@@ -233,3 +233,22 @@ def test_matches_that_are_no_session_file_are_named(inputs, tmp_path):
     run = run_pslog("batch", folder / "m2.mcap", "--do", "fuse", "-o", tmp_path / "out2")
     assert_one_line_error(run, 1, contains="m2.mcap (a link to a missing file)")
     assert_untouched(before, folder)
+
+
+def test_points_refused_at_out_are_said(tmp_path):
+    """``--out`` to a robot that is not listening (not started, or gone mid-run): each
+    refused send was counted by the sink and said nowhere, the run ended as if every point
+    had reached it. A note says how many were refused."""
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]  # (closed again: nothing listens there)
+    run = run_pslog("live", "--rig", "paper3", "--synthetic", "--motion", "throw",
+                    "--duration", "1", "--out", f"udp://127.0.0.1:{port}", cwd=tmp_path)
+    assert run.code == 0, run.stderr
+    assert "Traceback" not in run.stderr, run.stderr
+    note = [x for x in run.stderr.splitlines() if "refused" in x]
+    assert note and note[0].startswith(f"pslog live: note: --out udp://127.0.0.1:{port}: "), \
+        run.stderr
+    assert "point datagrams refused (nothing listened there" in note[0], note
