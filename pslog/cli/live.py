@@ -316,9 +316,9 @@ def _say_refused(sinks) -> None:
     for sink in sinks:
         if isinstance(sink, UdpSink) and sink.errors:
             n = sink.sent + sink.errors
-            _say(f"note: --out {_udp_text(sink.destination[:2])}: {sink.errors} of {n} point datagram"
-                 f"{'s' if n != 1 else ''} refused (nothing listened there at times: the "
-                 f"receiver not started, or gone; more may have been lost unseen)")
+            _say(f"note: --out {_udp_text(sink.destination[:2])}: {sink.errors} of {n} "
+                 f"point datagram{'s' if n != 1 else ''} refused (nothing listened there at "
+                 f"times: the receiver not started, or gone; more may have been lost unseen)")
 
 
 def _recording_failed(recording, exc: BaseException) -> bool:

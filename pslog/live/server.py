@@ -31,7 +31,7 @@ import numpy as np
 from ..errors import InputError, PslogError
 from ..records import NS
 from ..rig import Rig
-from .fuser import CameraLiveState, LiveFuser, Rehearsal, warm_up
+from .fuser import _UNKNOWN_NAMES, CameraLiveState, LiveFuser, Rehearsal, warm_up
 from .protocol import MAX_DETECTION_BYTES
 from .sinks import Sink, resolve_udp
 
@@ -314,6 +314,7 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
     next_status = started_mono + period
     was_silent = {c.name: True for c in fuser.cameras(started_mono)}
     heard: set[str] = set()
+    said_unknown = 0  # (fuser.unknown_cameras said so far)
     error: BaseException | None = None
     rehearsal_cpu = overlaps = 0
     rehearsed_until = 0  # (monotonic end of the latest rehearsal)
@@ -337,6 +338,17 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
         return out
 
     def events(now: int, now_mono: int) -> None:
+        nonlocal said_unknown
+        while said_unknown < len(fuser.unknown_cameras):  # (once each: a misnamed camera)
+            name = fuser.unknown_cameras[said_unknown]
+            said_unknown += 1
+            text = (f"camera {name!r} is not in the rig (it has {', '.join(rig.names)}):"
+                    f" its datagrams are dropped (unknown_camera)"
+                    + ("; further unknown names are counted, not named"
+                       if said_unknown == _UNKNOWN_NAMES else ""))
+            say(text)
+            for ev in on_event:
+                ev(now, text)
         for cam in fuser.cameras(now_mono):
             if cam.silent != was_silent[cam.name]:
                 was_silent[cam.name] = cam.silent

@@ -252,3 +252,60 @@ def test_points_refused_at_out_are_said(tmp_path):
     assert note and note[0].startswith(f"pslog live: note: --out udp://127.0.0.1:{port}: "), \
         run.stderr
     assert "point datagrams refused (nothing listened there" in note[0], note
+
+
+def test_a_camera_the_rig_lacks_is_named_once(tmp_path):
+    """A camera process started with the wrong name (``Cam1`` for ``cam1``, a name with a
+    control character): its datagrams were dropped as ``unknown_camera N`` in the status
+    line, the name said nowhere, so the user could not tell which sender was wrong. Each
+    name is said once, on one line, escaped."""
+    import signal
+    import socket
+    import subprocess
+    import sys
+    import time
+
+    from pslog.live.protocol import DetectionDatagram, encode_detections
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    proc = subprocess.Popen([sys.executable, "-m", "pslog.cli", "live", "--rig", "paper3",
+                             "--listen", f"udp://127.0.0.1:{port}", "--status-every", "0.2"],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    try:
+        line = proc.stderr.readline()
+        assert "listening" in line, line
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx:
+            for k in range(1, 30):
+                for name in ("Cam1", "cam\n2"):
+                    now = time.time_ns()
+                    tx.sendto(encode_detections(DetectionDatagram(
+                        name, k, k, now, now, [[320.0, 240.0]])), ("127.0.0.1", port))
+                time.sleep(0.01)
+        time.sleep(0.6)
+        proc.send_signal(signal.SIGINT)
+        err = proc.stderr.read()
+        assert proc.wait(HANG_S) == 0, err
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert "Traceback" not in err, err
+    lines = err.splitlines()
+    for shown in ("'Cam1'", "'cam\\n2'"):
+        said = [x for x in lines if f"camera {shown} is not in the rig" in x]
+        assert len(said) == 1, err
+        assert said[0] == (f"camera {shown} is not in the rig (it has cam1, cam2, "
+                           f"cam3): its datagrams are dropped (unknown_camera)"), said
+    assert "unknown_camera 58" in [x for x in lines if x.startswith("live ")][-1], err
+    # a sender of ever new names does not grow the fuser: 8 remembered, the rest counted
+    from pslog.live.fuser import LiveFuser
+    from pslog.rig import builtin_rig
+
+    fuser = LiveFuser(builtin_rig("paper3"), "filter", epoch_ns=10**18)
+    for k in range(100):
+        fuser.feed(encode_detections(DetectionDatagram(f"x{k}", 1, 1, 10**18 + 1, 10**18 + 1,
+                                                       [[1.0, 2.0]])), 10**18 + 2)
+    assert fuser.unknown_cameras == [f"x{k}" for k in range(8)]
+    assert fuser.counters()["unknown_camera"] == 100
