@@ -21,6 +21,8 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import errno
+import fnmatch
 import glob
 import hashlib
 import io
@@ -28,6 +30,7 @@ import json
 import math
 import os
 import shutil
+import stat
 import sys
 import time
 from collections.abc import Callable, Iterable, Iterator
@@ -166,6 +169,103 @@ def _glob_root(pattern: str) -> Path:
     return Path(pattern).parent
 
 
+def _not_a_session_file(path: str) -> str | None:
+    """What a match that is no session file is, in words (``a FIFO``, ``a link to a missing
+    file``, ...), or None: a regular file, or a folder not named like a session (a ``**``'s
+    folders are matches too, not misnamed sessions)."""
+    try:
+        st = os.stat(path)
+    except OSError as exc:
+        if os.path.islink(path):
+            return ("a loop of symbolic links" if exc.errno == errno.ELOOP
+                    else "a link to a missing file")
+        return f"unreadable: {exc.strerror or exc}"
+    if stat.S_ISREG(st.st_mode):
+        return None
+    if stat.S_ISDIR(st.st_mode):
+        return "a folder" if path.endswith(".mcap") else None
+    return ("a FIFO" if stat.S_ISFIFO(st.st_mode) else "a socket" if stat.S_ISSOCK(st.st_mode)
+            else "a device")
+
+
+def _glob_files(pattern: str, others: list[str] | None = None) -> list[str]:
+    """The files ``glob.glob(pattern, recursive=True)`` matches, sorted, but with each
+    folder that a ``**`` reaches more than once (through a symbolic link to a folder above
+    it: a loop) walked once: two such links in one folder made glob walk 2^40 paths (the
+    depth at which the kernel refuses to follow links), and ``pslog batch 'd/**/*.mcap'``
+    hung (sweep41). The same rules as glob otherwise: links to folders followed, names
+    starting with '.' matched only by a pattern that starts with one, ``**`` not into
+    hidden folders, unreadable folders passed over."""
+    if "**" not in pattern:  # (each component walks each folder once: no loop to fear)
+        matches = glob.glob(pattern, recursive=True)
+        if others is not None:  # (matches that are no session file: said by the caller)
+            others += [p for p in sorted(matches) if not os.path.isfile(p)]
+        return sorted(p for p in matches if os.path.isfile(p))
+    parts = pattern.split(os.sep)
+    first = next(i for i, part in enumerate(parts) if glob.has_magic(part))
+    prefix = os.sep.join(parts[:first]) if first else ""
+    if first == 1 and not parts[0]:  # (an absolute pattern: '/**/...')
+        prefix = os.sep
+    found: set[str] = set()
+    chain: list[tuple[int, int, int]] = []  # (component, device, inode) of the folders above
+
+    def names(folder: str, hidden: bool) -> list[tuple[str, bool]]:
+        try:
+            with os.scandir(folder or ".") as it:
+                out = []
+                for entry in it:
+                    if entry.name.startswith(".") and not hidden:
+                        continue
+                    try:
+                        is_dir = entry.is_dir()  # (follows links, as glob does)
+                    except OSError:
+                        is_dir = False
+                    out.append((entry.name, is_dir))
+                return out
+        except OSError:
+            return []
+
+    def walk(folder: str, k: int) -> None:
+        if k == len(parts):
+            if os.path.isfile(folder):
+                found.add(folder)
+            elif others is not None and os.path.lexists(folder):
+                missed.add(folder)
+            return
+        part = parts[k]
+        if part == "**":
+            try:
+                st = os.stat(folder or ".")
+            except OSError:
+                return
+            key = (k, st.st_dev, st.st_ino)
+            if key in chain:  # (a folder inside itself: a loop, walked once)
+                return
+            chain.append(key)
+            walk(folder, k + 1)  # (no folder)
+            for name, is_dir in names(folder, hidden=False):
+                if is_dir:
+                    walk(os.path.join(folder, name), k)
+                elif k + 1 == len(parts):  # (a trailing '**' matches files too)
+                    walk(os.path.join(folder, name), k + 1)
+            chain.pop()
+            return
+        if not glob.has_magic(part):
+            path = os.path.join(folder, part)
+            if os.path.lexists(path):
+                walk(path, k + 1)
+            return
+        for name, is_dir in names(folder, hidden=part.startswith(".")):
+            if fnmatch.fnmatchcase(name, part) and (is_dir or k + 1 == len(parts)):
+                walk(os.path.join(folder, name), k + 1)
+
+    missed: set[str] = set()
+    walk(prefix, first)
+    if others is not None:
+        others += sorted(missed)
+    return sorted(found)
+
+
 def _holds_results(folder: Path, cache: dict[Path, bool]) -> bool:
     """Whether ``folder`` holds a batch's results: a ``summary.csv`` whose header is
     pslog's, or a ``done.json`` marker."""
@@ -196,19 +296,28 @@ def _inside_results(path: Path, root: Path, cache: dict[Path, bool]) -> bool:
 
 
 def find_sessions(patterns: Iterable[str], outdir: str | Path,
-                  skipped: list[str] | None = None) -> list[Job]:
+                  skipped: list[str] | None = None,
+                  not_files: list[str] | None = None) -> list[Job]:
     """The session files matching ``patterns`` (``**`` spans folders), sorted, each with its
     result folder below ``outdir`` mirroring its path below the pattern's root. Files inside
     ``outdir`` and inside any folder holding a batch's results (a ``summary.csv`` with
     pslog's header, or a ``done.json`` beside the file) are left out; those of the latter are
-    appended to ``skipped``. :class:`InputError` when a pattern matches no file or two
-    sessions would share a result folder."""
+    appended to ``skipped``. Matches that are no session file (a link to a missing file or
+    a loop of links, a FIFO, a device, a folder named ``*.mcap``) are left out, and appended
+    to ``not_files`` as ``PATH (WHAT)``. :class:`InputError` when a pattern matches no file
+    (naming such matches) or two sessions would share a result folder."""
     out = Path(outdir).resolve()
     jobs: dict[str, Job] = {}
     cache: dict[Path, bool] = {}
     for pattern in patterns:
         root = _glob_root(pattern).resolve()
-        matched = sorted(p for p in glob.glob(pattern, recursive=True) if os.path.isfile(p))
+        others: list[str] = []
+        matched = _glob_files(pattern, others)
+        odd = [f"{p} ({what})" for p in others
+               if (what := _not_a_session_file(p)) is not None
+               and not Path(os.path.abspath(p)).is_relative_to(out)]
+        if not_files is not None:
+            not_files += [p for p in odd if p not in not_files]
         found = [p for p in matched if not Path(p).resolve().is_relative_to(out)]
         if matched and not found:
             raise InputError(f"every match of {pattern!r} lies inside -o {outdir} (the "
@@ -220,11 +329,14 @@ def find_sessions(patterns: Iterable[str], outdir: str | Path,
         if not found and not matched and os.path.isdir(pattern):
             # a folder is no pattern of its files: say which pattern is (quoted, as pasted)
             inside = os.path.join(glob.escape(pattern), "**", "*.mcap")
-            n = len([p for p in glob.glob(inside, recursive=True) if os.path.isfile(p)])
+            n = len(_glob_files(inside))
             suggested = shell_word(inside)
             raise InputError(f"{pattern} is a folder, not a session file: give its sessions "
                              f"as the quoted pattern {suggested} ({n} .mcap file"
                              f"{'' if n == 1 else 's'} there and in its subfolders)")
+        if not found and odd:
+            raise InputError(f"no session file matches {pattern!r}: "
+                             f"{', '.join(odd[:3])}{', ...' if len(odd) > 3 else ''}")
         if not found:
             raise InputError(f"no session file matches {pattern!r}"
                              + (f" (every match lies inside an earlier batch's results, e.g. "

@@ -131,7 +131,13 @@ def run(args: argparse.Namespace) -> int:
     if outdir.exists() and not outdir.is_dir():
         raise PslogError(f"-o {outdir}: not a folder")
     skipped: list[str] = []
-    jobs = find_sessions(args.patterns, outdir, skipped)
+    not_files: list[str] = []
+    jobs = find_sessions(args.patterns, outdir, skipped, not_files)
+    if not_files:  # (a session behind a broken link was left out without a word: sweep41)
+        n = len(not_files)
+        print(f"pslog batch: note: {n} match{'es' if n > 1 else ''} of the patterns "
+              f"{'are' if n > 1 else 'is'} no session file, left out: "
+              f"{', '.join(not_files[:3])}{', ...' if n > 3 else ''}", file=sys.stderr)
     if skipped:
         print(f"pslog batch: skipped {len(skipped)} file(s) inside earlier batch results "
               f"(a folder with pslog's summary.csv or done.json), e.g. {skipped[0]}",

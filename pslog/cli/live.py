@@ -305,6 +305,7 @@ def _run(args: argparse.Namespace, stop) -> int:
              f"/live/dropped topics): --hold {REORDERED_HINT_HOLD_S:g} lets each frame wait "
              f"that long for the other cameras' and fuses them in capture order, at that "
              f"cost in latency (docs/live.md)")
+    _say_refused(sinks)
     no_camera = cameras is not None and cameras.all_failed
     if recording is not None:
         if recording.empty:
@@ -317,6 +318,22 @@ def _run(args: argparse.Namespace, stop) -> int:
         failed = "; ".join(f"{c.name}: {c.message}" for c in cameras.cameras)
         raise InputError(f"no camera could be opened ({failed})")
     return 0
+
+
+def _say_refused(sinks) -> None:
+    """A note when point datagrams to --out were refused (the system said nothing listened
+    there: the robot not started, or gone): counted by the sink, they were said nowhere
+    (sweep41: a receiver closed mid-run, the run ended as if every point had reached it).
+    A count from below: after the port's refusal each send that finds it closed again is
+    refused, the others leave and are lost unseen."""
+    from pslog.live.sinks import UdpSink
+
+    for sink in sinks:
+        if isinstance(sink, UdpSink) and sink.errors:
+            n = sink.sent + sink.errors
+            _say(f"note: --out {_udp_text(sink.destination[:2])}: {sink.errors} of {n} "
+                 f"point datagram{'s' if n != 1 else ''} refused (nothing listened there at "
+                 f"times: the receiver not started, or gone; more may have been lost unseen)")
 
 
 def _recording_failed(recording, exc: BaseException) -> bool:

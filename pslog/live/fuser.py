@@ -63,7 +63,9 @@ from .protocol import (
 
 #: The counters of :meth:`LiveFuser.counters`, in order.
 COUNTERS = ("received", "fused", "duplicate", "reordered", "late", "future", *REASONS,
-            "unknown_camera", "fusion_error", "lost", "points")
+            "unknown_camera", "fusion_error", "lost", "overflow", "points")
+#: Camera names the rig lacks remembered to be said (``LiveFuser.unknown_cameras``).
+_UNKNOWN_NAMES = 8
 #: Sequences remembered per camera for the duplicate test.
 _SEEN = 4096
 #: Frames remembered per camera to find the arrival time behind a point.
@@ -482,6 +484,9 @@ class LiveFuser:
         self._counts = dict.fromkeys(COUNTERS, 0)
         self._names = tuple(rig.names)
         self._index = {name: i for i, name in enumerate(self._names)}
+        #: the first camera names datagrams gave that the rig lacks (at most
+        #: :data:`_UNKNOWN_NAMES`: a sender of random names must not grow it), in arrival order
+        self.unknown_cameras: list[str] = []
         self._cams = [CameraLiveState(name, i) for i, name in enumerate(rig.names)]
         self._newest = (np.iinfo(np.int64).min, -1)  # (logged ns, camera) of the newest fused
         self._clock_p = camera_parameters(rig)
@@ -522,6 +527,9 @@ class LiveFuser:
         cam = self._index.get(d.camera)
         if cam is None:
             counts["unknown_camera"] += 1
+            unknown = self.unknown_cameras
+            if len(unknown) < _UNKNOWN_NAMES and d.camera not in unknown:
+                unknown.append(d.camera)
             return []
         state = self._cams[cam]
         self.last_camera = d.camera
@@ -667,8 +675,15 @@ class LiveFuser:
         """Datagrams ``received``; frames ``fused``; dropped by reason (``duplicate``,
         ``reordered``, ``late``, ``truncated``, ``oversize``, ``foreign``, ``version``,
         ``malformed``, ``unknown_camera``, ``fusion_error``); frames ``lost`` on the way
-        (sequence gaps); ``points`` emitted."""
+        (sequence gaps); datagrams the socket's receive buffer had no room for, discarded by
+        the kernel before the fuser could read them (``overflow``: :meth:`socket_overflow`,
+        a flood); ``points`` emitted."""
         return dict(self._counts)
+
+    def socket_overflow(self, total: int) -> None:
+        """The kernel's count of datagrams its socket dropped for want of room (Linux
+        ``SO_RXQ_OVFL``, from the start), as the server reads it beside a datagram."""
+        self._counts["overflow"] = int(total)
 
     def cameras(self, now_ns: int | None = None) -> list[CameraLiveState]:
         """Each camera's state, ``silent`` updated to ``now_ns`` (on :attr:`monotonic`'s

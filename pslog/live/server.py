@@ -31,12 +31,15 @@ import numpy as np
 from ..errors import InputError, PslogError
 from ..records import NS
 from ..rig import Rig
-from .fuser import CameraLiveState, LiveFuser, Rehearsal, warm_up
+from .fuser import _UNKNOWN_NAMES, CameraLiveState, LiveFuser, Rehearsal, warm_up
 from .protocol import MAX_DETECTION_BYTES
 from .sinks import Sink, resolve_udp
 
 #: Linux: receive timestamps as a timespec (not exported by Python's socket module).
 _SO_TIMESTAMPNS = 35
+#: Linux's SO_RXQ_OVFL: each datagram comes with the socket's count of the datagrams its full
+#: receive buffer dropped (a flood: the kernel discards them before the fuser can see them)
+_SO_RXQ_OVFL = 40
 #: Receive buffer asked of the kernel: bursts of thousands of datagrams wait there, not lost.
 _RCVBUF = 8 << 20
 #: Longest wait for a datagram before looking at the clock (status, duration, stop), seconds.
@@ -124,9 +127,19 @@ def format_status(fuser: LiveFuser, cameras: list[CameraLiveState], now_ns: int,
     parts.append(f"datagrams {c['received']} points {c['points']}")
     drops = [f"{k} {c[k]}" for k in ("duplicate", "reordered", "late", "future", "truncated",
                                      "oversize", "foreign", "version", "malformed",
-                                     "unknown_camera", "fusion_error", "lost") if c[k]]
+                                     "unknown_camera", "fusion_error", "lost",
+                                     "overflow") if c[k]]
     parts.append("drops: " + (", ".join(drops) if drops else "none"))
     return " | ".join(parts)
+
+
+def _overflow(ancdata) -> int | None:
+    """The socket's count of datagrams dropped for want of room (``SO_RXQ_OVFL``), from a
+    datagram's ancillary data (None: not there, nothing dropped yet)."""
+    for level, kind, raw in ancdata:
+        if level == socket.SOL_SOCKET and kind == _SO_RXQ_OVFL and len(raw) >= 4:
+            return int(struct.unpack_from("@I", raw)[0])
+    return None
 
 
 def _arrival(ancdata, default: int) -> int:
@@ -266,6 +279,12 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
             sock.setsockopt(socket.SOL_SOCKET, _SO_TIMESTAMPNS, 1)
         except OSError:
             timestamps = False
+    overflow = sys.platform.startswith("linux")
+    if overflow:
+        try:
+            sock.setsockopt(socket.SOL_SOCKET, _SO_RXQ_OVFL, 1)
+        except OSError:
+            overflow = False
     stop = stop or threading.Event()
     if status_stream == "stderr":
         status_stream = sys.stderr
@@ -295,6 +314,7 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
     next_status = started_mono + period
     was_silent = {c.name: True for c in fuser.cameras(started_mono)}
     heard: set[str] = set()
+    said_unknown = 0  # (fuser.unknown_cameras said so far)
     error: BaseException | None = None
     rehearsal_cpu = overlaps = 0
     rehearsed_until = 0  # (monotonic end of the latest rehearsal)
@@ -318,6 +338,17 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
         return out
 
     def events(now: int, now_mono: int) -> None:
+        nonlocal said_unknown
+        while said_unknown < len(fuser.unknown_cameras):  # (once each: a misnamed camera)
+            name = fuser.unknown_cameras[said_unknown]
+            said_unknown += 1
+            text = (f"camera {name!r} is not in the rig (it has {', '.join(rig.names)}):"
+                    f" its datagrams are dropped (unknown_camera)"
+                    + ("; further unknown names are counted, not named"
+                       if said_unknown == _UNKNOWN_NAMES else ""))
+            say(text)
+            for ev in on_event:
+                ev(now, text)
         for cam in fuser.cameras(now_mono):
             if cam.silent != was_silent[cam.name]:
                 was_silent[cam.name] = cam.silent
@@ -345,6 +376,10 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
         nonlocal n_cpu, overlaps, floor
         cpu0 = thread_time()
         arrival = _arrival(ancdata, now)
+        if len(ancdata) > timestamps:  # (the kernel adds the count once it dropped any)
+            dropped = _overflow(ancdata)
+            if dropped is not None:
+                fuser.socket_overflow(dropped)
         floor = arrival_mono = arrival_monotonic(arrival, now, now_mono, floor)
         overlaps += arrival_mono < rehearsed_until
         points = fuser.feed(data, arrival, arrival_mono)
@@ -361,7 +396,8 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
             rehearsal.plan(fuser, now_mono)
 
     bufsize = max(MAX_DETECTION_BYTES + 1, 65536)  # larger ones are seen whole: oversize
-    anc = socket.CMSG_SPACE(16) if timestamps else 0
+    anc = (socket.CMSG_SPACE(16) if timestamps else 0) + (socket.CMSG_SPACE(4) if overflow
+                                                           else 0)
     # Ctrl-C ends the run between two datagrams (not inside one: each one received is
     # fused): in the main thread with Python's own SIGINT handler, it sets ``stop`` instead
     restore_sigint = None

@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import codecs
 import csv
+import unicodedata
 from decimal import ROUND_HALF_EVEN, Decimal, InvalidOperation
 from pathlib import Path
 
@@ -188,24 +189,64 @@ def session_clock(detections: Detections) -> tuple[Detections, int]:
 
 def parse_columns(text: str) -> dict[str, str]:
     """``--columns`` of ``pslog import``: ``NAME=COLUMN,...`` (a pslog column each, e.g.
-    ``time=t_unix,u=px,v=py,frame=frame_id,score=conf``) as {file's column: pslog's}. Raises
-    InputError naming a malformed item, a name that is not a detections column, a name or a
-    file's column given twice."""
+    ``time=t_unix,u=px,v=py,frame=frame_id,score=conf``) as {file's column: pslog's}. A
+    COLUMN in double quotes is taken whole, commas and quotes inside it (``time="t,unix"``,
+    ``""`` for a quote, as CSV quotes a header); columns compare in Unicode's composed form
+    (NFC: an accent typed as one character or as two). Raises InputError naming a malformed
+    item (an unmatched quote), a name that is not a detections column, a name or a file's
+    column given twice."""
     out: dict[str, str] = {}
     named: set[str] = set()
-    for item in text.split(","):
+    items: list[str] = []
+    chars: list[str] = []
+    quoted = False
+    for char in text:  # (commas inside double quotes belong to a column's name)
+        if char == '"':
+            quoted = not quoted
+        if char == "," and not quoted:
+            items.append("".join(chars))
+            chars = []
+        else:
+            chars.append(char)
+    items.append("".join(chars))
+    if quoted:
+        raise InputError(f"--columns: {_shown(text)} has an unmatched double quote (quote a "
+                         f"column whole: time=\"t,unix\")")
+    for k, item in enumerate(items):
         name, eq, column = (part.strip() for part in item.partition("="))
+        if len(column) >= 2 and column[0] == column[-1] == '"':
+            column = column[1:-1].replace('""', '"')
         if not eq or not name or not column:
-            raise InputError(f"--columns: {item.strip()!r} is not NAME=COLUMN (e.g. "
-                             f"time=t_unix,u=px,v=py)")
+            comma = (f" (a column whose name holds a comma: quote it, "
+                     f"{items[k - 1].strip()},{item.strip()} as "
+                     f"{items[k - 1].partition('=')[0].strip()}=\""
+                     f"{items[k - 1].partition('=')[2].strip()},{item.strip()}\")"
+                     if k and not eq and item.strip() and "=" in items[k - 1] else "")
+            raise InputError(f"--columns: {_shown(item.strip())} is not NAME=COLUMN (e.g. "
+                             f"time=t_unix,u=px,v=py){comma}")
         if name not in DETECTION_COLUMNS:
-            raise InputError(f"--columns: {name!r} is not a detections column (one of "
+            raise InputError(f"--columns: {_shown(name)} is not a detections column (one of "
                              f"{', '.join(DETECTION_COLUMNS)})")
+        column = unicodedata.normalize("NFC", column)
         if name in named or column in out:
-            raise InputError(f"--columns: {name if name in named else column!r} given twice")
+            raise InputError(f"--columns: {_shown(name if name in named else column)} given "
+                             f"twice")
         named.add(name)
         out[column] = name
     return out
+
+
+def _shown(text: str, limit: int = 80) -> str:
+    """``text`` for an error line: quoted, escapes for what would break the line (a newline,
+    a control character), shortened past ``limit`` characters."""
+    return repr(text if len(text) <= limit else text[:limit] + "...")
+
+
+def _header_cells(header: list[str]) -> str:
+    """A header's cells for an error line, each as :func:`_shown` gives it, 200 characters at
+    most."""
+    cells = ", ".join(_shown(h, 40) for h in header)
+    return cells if len(cells) <= 200 else cells[:200] + "..."
 
 
 def read_detections_csv(path, rig: Rig, camera: str | None = None,
@@ -285,12 +326,26 @@ def read_detections_csv(path, rig: Rig, camera: str | None = None,
             raise InputError(f"{path}: empty file (expected header {expected})")
         header = [h.strip() for h in header]
         if columns:  # (a detector's own names: --columns)
-            absent = [c for c in columns if c not in header]
+            own = [unicodedata.normalize("NFC", h) for h in header]  # (parse_columns')
+            absent = [c for c in columns if c not in own]
             if absent:
-                raise InputError(f"{path}: line 1: no column {absent[0]!r} (--columns "
-                                 f"{columns[absent[0]]}={absent[0]}); the header has "
-                                 f"{', '.join(header)[:200]}")
-            header = [columns.get(h, h) for h in header]
+                raise InputError(f"{path}: line 1: no column {_shown(absent[0])} (--columns "
+                                 f"{columns[absent[0]]}={_shown(absent[0])[1:-1]}); the header "
+                                 f"has {_header_cells(header)}")
+            twice = [h for h in columns if own.count(h) > 1]
+            if twice:
+                raise InputError(f"{path}: line 1: column {_shown(twice[0])} (--columns "
+                                 f"{columns[twice[0]]}=...) is in the header "
+                                 f"{own.count(twice[0])} times: which one is meant is not "
+                                 f"known; rename one in the file")
+            clash = [h for h in own if h in columns.values() and h not in columns]
+            if clash:
+                mapped = next(c for c, n in columns.items() if n == clash[0])
+                raise InputError(f"{path}: line 1: --columns {clash[0]}={_shown(mapped)[1:-1]} "
+                                 f"reads {_shown(mapped)} as {clash[0]}, but the header has "
+                                 f"a column {clash[0]} too: map that one to another name or "
+                                 f"leave {clash[0]} out of --columns")
+            header = [columns.get(h, h) for h in own]
         unknown = [h for h in header if h not in DETECTION_COLUMNS]
         missing = [h for h in required if h not in header]
         if tuple(header[:len(TRACK_COLUMNS)]) == TRACK_COLUMNS:  # (pslog export --csv's)
@@ -310,6 +365,8 @@ def read_detections_csv(path, rig: Rig, camera: str | None = None,
                 f"{expected} and optionally {optional}"
                 + (f" (unknown: {', '.join(unknown)})" if unknown else "")
                 + (f" (missing: {', '.join(missing)})" if missing else "")
+                + (f" (twice: {', '.join(sorted({h for h in header if header.count(h) > 1}))})"
+                   if len(set(header)) != len(header) else "")
                 + ("; one camera's file: name its camera, --detections CAMERA=FILE"
                    if missing == ["camera"] and not unknown else "")
                 + ("; its fields are separated by ';': separate them by commas (or tabs), "
