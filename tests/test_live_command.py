@@ -636,3 +636,26 @@ def test_a_bad_live_method_says_what_is_wrong_in_one_line(method, message, capsy
         main(["live", "--rig", "paper3", "--method", method])
     err = capsys.readouterr().err
     assert info.value.code == 2 and message in err and err.count("\n") == 1, err
+
+
+def test_a_synthetic_live_recording_holds_the_truth(synthetic_run, cli):
+    """``--synthetic --record`` stores the motion's truth at every shutter on the session
+    clock, so ``pslog eval`` scores the live points (walk41: it held none)."""
+    from pslog.log import read_session
+    from pslog.motion import get_motion
+
+    folder, _, code, _ = synthetic_run
+    assert code == 0
+    session = read_session(folder / "session.mcap")
+    truth, det = session.truth, session.detections
+    assert truth is not None and len(truth) > 100
+    # every recorded frame's time is a shutter of the truth (the schedule starts a whole
+    # number of seconds after the fuser's clock): the shift, read off the first frame
+    assert np.isin(det.frame_time_ns, truth.time_ns).all()
+    shift = int(det.frame_time_ns.min()) // 1_000_000_000 * 1_000_000_000
+    np.testing.assert_allclose(truth.position_world, get_motion("rally").position(
+        (truth.time_ns - shift) / 1e9), rtol=0, atol=1e-12)
+    code, out, err = cli("eval", folder / "session.mcap")
+    assert code == 0, err
+    mean = float(re.search(r"^typeA\s+\d+\s+[\d.]+\s+([\d.]+)", out, re.M).group(1))
+    assert 0 < mean < 20, out  # mm (type A's at the paper's noise: a few mm)

@@ -152,7 +152,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--jsonl", action="store_true",
                         help="print every point as one JSON object per line on stdout")
     parser.add_argument("--record", metavar="SESSION.mcap",
-                        help="record the session (detections and the emitted points) there")
+                        help="record the session (detections and the emitted points; with "
+                             "--synthetic the motion's truth too) there")
     view = parser.add_mutually_exclusive_group()
     view.add_argument("--view", action="store_true",
                       help="show the points live in a rerun viewer (needs a display)")
@@ -505,20 +506,60 @@ def _jsonl(args: argparse.Namespace, stop):
     return Jsonl(sys.stdout)
 
 
+def _synthetic_truth(args: argparse.Namespace, rig):
+    """The ball's truth of ``--synthetic``'s motion at every shutter of ``rig`` from the
+    motion's time 0 (:func:`recorders.synthetic.synthetic_truth`, as ``pslog record
+    --synthetic`` stores it)."""
+    from pslog.motion import get_motion
+    from recorders.synthetic import synthetic_truth
+
+    motion = get_motion(args.motion)
+    return synthetic_truth(rig, motion, motion.duration if args.duration is None
+                           else args.duration)
+
+
 def _recording(args: argparse.Namespace, rig):
     """core's RecordSink that, when nothing at all was recorded, leaves no session behind:
     a new file is removed, an old one (``--force``) kept instead of replaced by an empty one."""
     from pslog.live.sinks import RecordSink
     from pslog.rig import timing_label
 
+    truth = _synthetic_truth(args, rig) if args.synthetic else None
+
     class Recording(RecordSink):
         empty = False
+        _first: tuple[int, int, int] | None = None  # (camera, frame index, session ns)
+
+        def _write_frame(self, d) -> None:
+            if self._first is None:
+                self._first = (self._index[d.camera], int(d.frame_index),
+                               self._session(d.t_capture_ns))
+            super()._write_frame(d)
+
+        def _write_truth(self) -> None:
+            """The synthetic motion's truth at every shutter, on the session clock: the
+            cameras' schedule starts a whole number of seconds after the fuser's clock
+            (recorders.live), read off the first frame written (walk41: a live synthetic
+            recording held no truth, its accuracy could not be evaluated)."""
+            from pslog.records import Truth
+            from recorders.sources import synthetic_times
+
+            if truth is None or self._first is None:
+                return
+            cam, index, t = self._first
+            stamps = synthetic_times(rig.cameras[cam], index * 2 / rig.cameras[cam].fps + 1)
+            if index >= len(stamps):
+                return
+            shift = t - int(stamps[index])
+            self.writer.add_truth(Truth(truth.time_ns + shift, truth.position_world))
 
         def close(self) -> None:
             if self.frames == 0 and self.dropped_frames == 0:
                 self.empty = True
                 self.abort()
             else:
+                if self._error is None:
+                    self._jobs.put((self._write_truth,))
                 super().close()
 
         def discard(self) -> None:
