@@ -14,7 +14,7 @@ from _cli import pslog as _pslog
 from pslog import read_session
 from pslog.estimation.sync import motion_period
 from pslog.fusion._prepare import default_max_gap_s
-from pslog.motion import MOTIONS
+from pslog.motion import MOTIONS, at_rest_first
 from pslog.records import NS, Observations
 from pslog.rig import builtin_rig
 from pslog.simulation import SimulationOptions, simulate_labelled, true_rig
@@ -111,3 +111,20 @@ def test_sync_of_a_rally_says_nothing_of_a_period(tmp_path):
     done = _pslog("sync", path, "-o", tmp_path / "synced.mcap")
     assert done.returncode == 0, done.stderr
     assert "repeats" not in done.stdout
+
+
+def test_a_turntable_after_a_long_rest_is_periodic_and_a_rally_after_one_is_not():
+    """review41b: the ball still for 10 s, then turning 10 s: offsets are as ambiguous as on
+    a turntable alone (the still half fixes none), but the still pairs, close at every lag,
+    kept the track from ever counting as moved: no period. Only the detections where the
+    track moves are compared now; a rally after 16 s at rest still has none."""
+    rig = builtin_rig("paper3")
+    opts = SimulationOptions(noise_px=0.3, miss_rate=0.1, seed=69008)
+    for motion, period in ((MOTIONS["turntable"], TURNTABLE_S), (MOTIONS["rally"], None)):
+        rest = 20.0 - (10.0 if period else 4.0)
+        _, _, ball = simulate_labelled(rig, at_rest_first(motion, rest), 20.0, opts)
+        got = motion_period(ball.best(), true_rig(rig, opts), default_max_gap_s(rig))
+        if period is None:
+            assert got is None
+        else:
+            assert got == pytest.approx(period, abs=1e-3)

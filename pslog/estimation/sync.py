@@ -1304,7 +1304,7 @@ def _still(uv: np.ndarray) -> np.ndarray:
 #: A motion repeats with period ``L`` (:func:`motion_period`) where, in every camera's view,
 #: three quarters of its detections lie within this many pixels of its own track ``L`` later.
 PERIOD_TOL_PX = 3.0
-#: ... and the track moves: at some shorter lag, a quarter of them lie further than this.
+#: ... and the track moves: at some shorter lag, three quarters of them lie further than this.
 PERIOD_MOVES_PX = 30.0
 #: The lags tried: from this (s) to half the span of a camera's detections, at most
 #: :data:`PERIOD_MAX_S`, on a grid of :data:`_PERIOD_STEP_S`, then refined to
@@ -1326,11 +1326,14 @@ def motion_period(obs: Observations, rig: Rig, max_gap_s: float) -> float | None
     no estimate from them can tell them apart (session 41).
 
     At a lag ``L``, each of (up to :data:`_PERIOD_DETECTIONS` of) a camera's detections at
-    time ``t`` (the rig's clock model applied) is compared with the camera's own pixel at
+    time ``t`` (the rig's clock model applied) where its track moves (more than
+    :data:`PERIOD_TOL_PX` to its detection :data:`PERIOD_MIN_S` later: a still stretch, the
+    same at every lag, fixes no offset and tells no period; a camera whose track never
+    moves is not compared) is compared with the camera's own pixel at
     ``t + L``, linearly interpolated between its two detections around it (no further apart
-    than ``max_gap_s``). ``L`` is a period where, for every camera, at least 30 such pairs
+    than ``max_gap_s``). ``L`` is a period where, for every camera compared, at least 30 pairs
     exist (a quarter of those tried) and three quarters of them lie within
-    :data:`PERIOD_TOL_PX`, while at some shorter lag a quarter lie further than
+    :data:`PERIOD_TOL_PX`, while at some shorter lag three quarters lie further than
     :data:`PERIOD_MOVES_PX` (a ball at rest repeats at any lag: no period). The smallest such
     ``L`` of a grid of :data:`_PERIOD_STEP_S` from :data:`PERIOD_MIN_S` to half the shortest
     camera span (at most :data:`PERIOD_MAX_S`), refined at :data:`_PERIOD_FINE_S` to the
@@ -1360,17 +1363,28 @@ def motion_period(obs: Observations, rig: Rig, max_gap_s: float) -> float | None
         rows = rows[np.argsort(t[rows], kind="stable")]
         if len(rows) < 2 * MIN_DETECTIONS:
             return None  # (a camera seen too little repeats nothing that can be told)
-        tracks.append((t[rows], obs.uv[rows]))
-    span = min(float(tc[-1] - tc[0]) for tc, _ in tracks)
+        tc, uc = t[rows], obs.uv[rows]
+        # the detections where the track moves: more than PERIOD_TOL_PX to its detection
+        # PERIOD_MIN_S on (review41b: a turntable after 10 s at rest was no period, its
+        # still half close at every lag and never "moved")
+        ahead = np.searchsorted(tc, tc + PERIOD_MIN_S)
+        there = np.minimum(ahead, len(tc) - 1)
+        moving = np.flatnonzero((ahead < len(tc)) & (tc[there] - tc <= PERIOD_MIN_S + max_gap_s)
+                                & (np.hypot(*(uc[there] - uc).T) > PERIOD_TOL_PX))
+        tracks.append((tc, uc, moving[np.unique(np.linspace(
+            0, len(moving) - 1, min(len(moving), _PERIOD_DETECTIONS)).astype(int))]))
+    span = min(float(tc[-1] - tc[0]) for tc, _, _ in tracks)
     top = min(PERIOD_MAX_S, span / 2)
-    if top <= PERIOD_MIN_S:
+    # the cameras whose track moves (one seeing the ball still, at every lag the same, tells
+    # no period; none: no period)
+    active = [c for c, (_, _, rows) in enumerate(tracks) if len(rows) >= 2 * MIN_DETECTIONS]
+    if top <= PERIOD_MIN_S or not active:
         return None
 
     def distances(c: int, lags: np.ndarray) -> np.ndarray:
         """(k, n) camera ``c``'s pixel distances from its detections at ``t`` to its track
         at ``t + lags`` (k,) (NaN: no pair of detections around it within the gap)."""
-        tc, uc = tracks[c]
-        rows = np.unique(np.linspace(0, len(tc) - 1, _PERIOD_DETECTIONS).astype(int))
+        tc, uc, rows = tracks[c]
         at = tc[rows][None, :] + lags[:, None]
         j = np.clip(np.searchsorted(tc, at), 1, len(tc) - 1)
         ta, tb = tc[j - 1], tc[j]
@@ -1403,17 +1417,17 @@ def motion_period(obs: Observations, rig: Rig, max_gap_s: float) -> float | None
     # every tenth lag (a ball at rest repeats at any lag: the period must come after the
     # first lag at which some camera's track has moved away); the other cameras only at the
     # lags left
-    close = share_at(0, lags, 0) >= 0.75
+    close = share_at(active[0], lags, 0) >= 0.75
     if not close.any():
         return None
     coarse = lags[::10]
     moved = np.zeros(len(coarse), dtype=bool)
-    for c in range(len(rig)):
+    for c in active:
         moved |= share_at(c, coarse, 1) >= 0.75
     if not moved.any():
         return None
     left = np.flatnonzero(close & (lags > coarse[np.argmax(moved)]))
-    for c in range(1, len(rig)):
+    for c in active[1:]:
         left = left[share_at(c, lags[left], 0) >= 0.75]
     if not len(left):
         return None
@@ -1426,7 +1440,7 @@ def motion_period(obs: Observations, rig: Rig, max_gap_s: float) -> float | None
         with np.errstate(invalid="ignore"), warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
             return np.max([np.nanmedian(distances(c, trial), axis=1)
-                           for c in range(len(rig))], axis=0)
+                           for c in active], axis=0)
 
     near = lags[k:k + _PERIOD_RUN]
     run = int(np.argmin(np.r_[close[k:k + _PERIOD_RUN], False]))
