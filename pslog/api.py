@@ -472,7 +472,8 @@ def sync(session: Session | str | os.PathLike[str],
         from .estimation.sync import motion_period
         from .fusion._prepare import default_max_gap_s
 
-        period = motion_period(obs, result.rig, default_max_gap_s(result.rig))
+        period = motion_period(obs, result.rig, default_max_gap_s(result.rig),
+                               result.noise_px)
     if period is not None:
         half = period / 2 * 1e3
         offsets = ", ".join(f"{cam.name} {cam.clock_offset * 1e3:+.2f} ms"

@@ -1304,6 +1304,9 @@ def _still(uv: np.ndarray) -> np.ndarray:
 #: A motion repeats with period ``L`` (:func:`motion_period`) where, in every camera's view,
 #: three quarters of its detections lie within this many pixels of its own track ``L`` later.
 PERIOD_TOL_PX = 3.0
+#: ... or this many times the pixel noise σ given, where more (review41b: a turntable at
+#: 1.5 px noise was no period at 3 px: a noisy pair's distance exceeds it in half the pairs)
+PERIOD_TOL_SIGMAS = 4.0
 #: ... and the track moves: at some shorter lag, three quarters of them lie further than this.
 PERIOD_MOVES_PX = 30.0
 #: The lags tried: from this (s) to half the span of a camera's detections, at most
@@ -1319,7 +1322,8 @@ _PERIOD_RUN = 50
 _PERIOD_DETECTIONS = 400
 
 
-def motion_period(obs: Observations, rig: Rig, max_gap_s: float) -> float | None:
+def motion_period(obs: Observations, rig: Rig, max_gap_s: float,
+                  noise_px: float = 0.0) -> float | None:
     """The period (s) with which the ball's motion repeats in every camera's view (a
     turntable, a pendulum), or None: the time shift under which each camera's track maps
     onto itself, so that offsets whole periods apart fit the detections equally well and
@@ -1327,13 +1331,14 @@ def motion_period(obs: Observations, rig: Rig, max_gap_s: float) -> float | None
 
     At a lag ``L``, each of (up to :data:`_PERIOD_DETECTIONS` of) a camera's detections at
     time ``t`` (the rig's clock model applied) where its track moves (more than
-    :data:`PERIOD_TOL_PX` to its detection :data:`PERIOD_MIN_S` later: a still stretch, the
+    the tolerance to its detection :data:`PERIOD_MIN_S` later: a still stretch, the
     same at every lag, fixes no offset and tells no period; a camera whose track never
     moves is not compared) is compared with the camera's own pixel at
     ``t + L``, linearly interpolated between its two detections around it (no further apart
     than ``max_gap_s``). ``L`` is a period where, for every camera compared, at least 30 pairs
     exist (a quarter of those tried) and three quarters of them lie within
-    :data:`PERIOD_TOL_PX`, while at some shorter lag three quarters lie further than
+    the tolerance (:data:`PERIOD_TOL_PX`, or :data:`PERIOD_TOL_SIGMAS` times ``noise_px``
+    where more), while at some shorter lag three quarters lie further than
     :data:`PERIOD_MOVES_PX` (a ball at rest repeats at any lag: no period). The smallest such
     ``L`` of a grid of :data:`_PERIOD_STEP_S` from :data:`PERIOD_MIN_S` to half the shortest
     camera span (at most :data:`PERIOD_MAX_S`), refined at :data:`_PERIOD_FINE_S` to the
@@ -1344,6 +1349,8 @@ def motion_period(obs: Observations, rig: Rig, max_gap_s: float) -> float | None
     obs : Observations, the ball, one per frame, at LOGGED times
     rig : Rig, the clock model (an estimate's) applied to ``obs``
     max_gap_s : float, the widest pair of a camera's detections interpolated, s
+    noise_px : float, the detections' pixel noise σ (a sync's ``noise_px``): the tolerance
+        :data:`PERIOD_TOL_PX` is widened to :data:`PERIOD_TOL_SIGMAS` σ where that is more
 
     Returns
     -------
@@ -1351,6 +1358,7 @@ def motion_period(obs: Observations, rig: Rig, max_gap_s: float) -> float | None
     """
     from ..timing import true_times_ns
 
+    tol = max(PERIOD_TOL_PX, PERIOD_TOL_SIGMAS * float(noise_px))
     if len(obs) == 0 or len(rig) < 2:
         return None
     p = camera_parameters(rig)
@@ -1370,7 +1378,7 @@ def motion_period(obs: Observations, rig: Rig, max_gap_s: float) -> float | None
         ahead = np.searchsorted(tc, tc + PERIOD_MIN_S)
         there = np.minimum(ahead, len(tc) - 1)
         moving = np.flatnonzero((ahead < len(tc)) & (tc[there] - tc <= PERIOD_MIN_S + max_gap_s)
-                                & (np.hypot(*(uc[there] - uc).T) > PERIOD_TOL_PX))
+                                & (np.hypot(*(uc[there] - uc).T) > tol))
         tracks.append((tc, uc, moving[np.unique(np.linspace(
             0, len(moving) - 1, min(len(moving), _PERIOD_DETECTIONS)).astype(int))]))
     span = min(float(tc[-1] - tc[0]) for tc, _, _ in tracks)
@@ -1396,12 +1404,12 @@ def motion_period(obs: Observations, rig: Rig, max_gap_s: float) -> float | None
         return np.where(inside, np.hypot(du, dv), np.nan)
 
     def shares(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(k,) the share of each lag's pairs within PERIOD_TOL_PX and beyond
+        """(k,) the share of each lag's pairs within the tolerance and beyond
         PERIOD_MOVES_PX (0 where too few pairs)."""
         pairs = np.count_nonzero(~np.isnan(d), axis=1)
         enough = pairs >= max(MIN_DETECTIONS, d.shape[1] // 4)
         with np.errstate(invalid="ignore", divide="ignore"):
-            close = np.count_nonzero(d <= PERIOD_TOL_PX, axis=1) / pairs
+            close = np.count_nonzero(d <= tol, axis=1) / pairs
             far = np.count_nonzero(d > PERIOD_MOVES_PX, axis=1) / pairs
         return np.where(enough, close, 0.0), np.where(enough, far, 0.0)
 
