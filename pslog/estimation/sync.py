@@ -1372,7 +1372,7 @@ def motion_period(obs: Observations, rig: Rig, max_gap_s: float,
         if len(rows) < 2 * MIN_DETECTIONS:
             return None  # (a camera seen too little repeats nothing that can be told)
         tc, uc = t[rows], obs.uv[rows]
-        # the detections where the track moves: more than PERIOD_TOL_PX to its detection
+        # the detections where the track moves: more than the tolerance to its detection
         # PERIOD_MIN_S on (review41b: a turntable after 10 s at rest was no period, its
         # still half close at every lag and never "moved")
         ahead = np.searchsorted(tc, tc + PERIOD_MIN_S)
