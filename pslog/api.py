@@ -229,12 +229,12 @@ class SyncOutcome:
         (:func:`pslog.timing.recorded_clocks` of every clock parameter); the estimate
         started from it and tested against it for the parameters it estimates (or auto
         tests), the others kept at the copy's values
-    motion_period_s : the period (s) with which the ball's motion repeats in every camera's
-        view (:func:`pslog.estimation.sync.motion_period`; a turntable), or None: offsets
-        whole periods apart then fit alike, and ``notes`` says so
     prior_estimated : whether ``prior`` holds clock estimates of an earlier sync that did
         not record its own starting model (a pslog before session 38), as known values: said
         in ``notes`` and recorded with the copy, so that every later sync says it too
+    motion_period_s : the period (s) with which the ball's motion repeats in every camera's
+        view (:func:`pslog.estimation.sync.motion_period`; a turntable), or None: offsets
+        whole periods apart then fit alike, and ``notes`` says so
     """
 
     rig: Rig
