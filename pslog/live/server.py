@@ -197,6 +197,18 @@ def _collect_due(sock: socket.socket) -> None:
     gc.collect(2 if c2 > t2 else 1 if c1 > t1 else 0)
 
 
+def _linux_option(sock: socket.socket, option: int) -> bool:
+    """Turn a Linux socket option (``SOL_SOCKET``) on; False where it cannot be (another
+    system, or a kernel without it): the receive timestamps and the overflow count."""
+    if not sys.platform.startswith("linux"):
+        return False
+    try:
+        sock.setsockopt(socket.SOL_SOCKET, option, 1)
+    except OSError:
+        return False
+    return True
+
+
 def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
           duration_s: float | None = None, stop: threading.Event | None = None,
           status_every_s: float = 1.0, silent_after_s: float = 1.0,
@@ -273,18 +285,8 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
                 (getattr(s, "abort", None) or s.close)()
         raise
     address = sock.getsockname()[:2]
-    timestamps = sys.platform.startswith("linux")
-    if timestamps:
-        try:
-            sock.setsockopt(socket.SOL_SOCKET, _SO_TIMESTAMPNS, 1)
-        except OSError:
-            timestamps = False
-    overflow = sys.platform.startswith("linux")
-    if overflow:
-        try:
-            sock.setsockopt(socket.SOL_SOCKET, _SO_RXQ_OVFL, 1)
-        except OSError:
-            overflow = False
+    timestamps = _linux_option(sock, _SO_TIMESTAMPNS)
+    overflow = _linux_option(sock, _SO_RXQ_OVFL)
     stop = stop or threading.Event()
     if status_stream == "stderr":
         status_stream = sys.stderr
