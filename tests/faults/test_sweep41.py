@@ -13,6 +13,7 @@ have."""
 
 from __future__ import annotations
 
+import contextlib
 import unicodedata
 from pathlib import Path
 
@@ -156,6 +157,30 @@ def test_a_folder_linked_into_itself_given_as_the_pattern_is_counted(inputs, tmp
     assert_untouched(before, tmp_path)
 
 
+@contextlib.contextmanager
+def _listening_fuser(tmp_path: Path):
+    """``pslog live --rig paper3`` listening on a UDP port of the system's pick, as a real
+    process (:class:`test_live_command.LiveRun`): yields the run and the port, then stops it
+    with Ctrl-C and checks that it ends with exit 0 and no traceback (killed should the test
+    fail first)."""
+    import signal
+
+    from test_live_command import LiveRun
+
+    run = LiveRun("--rig", "paper3", "--listen", "udp://127.0.0.1:0", "--status-every", "0.2",
+                  cwd=tmp_path)
+    try:
+        port = int(run.wait_err(r"listening for detection datagrams on "
+                                r"udp://127\.0\.0\.1:(\d+)").group(1))
+        yield run, port
+        run.proc.send_signal(signal.SIGINT)
+        assert run.finish(HANG_S) == 0, "\n".join(run.err)
+    finally:
+        if run.proc.poll() is None:
+            run.proc.kill()
+            run.proc.wait()
+
+
 def test_datagrams_a_flood_makes_the_kernel_drop_are_counted(tmp_path):
     """A flood while the fuser is stopped (SIGSTOP: a fuser busy elsewhere, a burst larger
     than its socket's buffer): the kernel dropped what the buffer had no room for, and
@@ -165,39 +190,22 @@ def test_datagrams_a_flood_makes_the_kernel_drop_are_counted(tmp_path):
     import re
     import signal
     import socket
-    import subprocess
-    import sys
     import time
 
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
-    proc = subprocess.Popen([sys.executable, "-m", "pslog.cli", "live", "--rig", "paper3",
-                             "--listen", f"udp://127.0.0.1:{port}", "--status-every", "0.2"],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
-    try:
-        line = proc.stderr.readline()  # 'listening for detection datagrams on ...'
-        assert "listening" in line, line
-        proc.send_signal(signal.SIGSTOP)
+    with _listening_fuser(tmp_path) as (run, port):
+        run.proc.send_signal(signal.SIGSTOP)
         sent = 0
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx:
             for _ in range(20_000):  # 40 MB: ten times the 4 MB buffer the kernel grants
                 tx.sendto(b"NOPE" + bytes(2000), ("127.0.0.1", port))
                 sent += 1
-            proc.send_signal(signal.SIGCONT)
+            run.proc.send_signal(signal.SIGCONT)
             time.sleep(1.0)  # (the buffer read)
             # the kernel's count comes with the next datagram it queues
             tx.sendto(b"NOPE" + bytes(2000), ("127.0.0.1", port))
             sent += 1
             time.sleep(0.5)
-        proc.send_signal(signal.SIGINT)
-        err = proc.stderr.read()
-        assert proc.wait(HANG_S) == 0, err
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
-    assert "Traceback" not in err, err
+    err = "\n".join(run.err)
     final = [x for x in err.splitlines() if x.startswith("live ")][-1]
     assert "overflow" in final, final
     received = int(re.search(r"datagrams (\d+)", final).group(1))
@@ -259,23 +267,12 @@ def test_a_camera_the_rig_lacks_is_named_once(tmp_path):
     control character): its datagrams were dropped as ``unknown_camera N`` in the status
     line, the name said nowhere, so the user could not tell which sender was wrong. Each
     name is said once, on one line, escaped."""
-    import signal
     import socket
-    import subprocess
-    import sys
     import time
 
     from pslog.live.protocol import DetectionDatagram, encode_detections
 
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
-    proc = subprocess.Popen([sys.executable, "-m", "pslog.cli", "live", "--rig", "paper3",
-                             "--listen", f"udp://127.0.0.1:{port}", "--status-every", "0.2"],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
-    try:
-        line = proc.stderr.readline()
-        assert "listening" in line, line
+    with _listening_fuser(tmp_path) as (run, port):
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx:
             for k in range(1, 30):
                 for name in ("Cam1", "cam\n2"):
@@ -284,14 +281,7 @@ def test_a_camera_the_rig_lacks_is_named_once(tmp_path):
                         name, k, k, now, now, [[320.0, 240.0]])), ("127.0.0.1", port))
                 time.sleep(0.01)
         time.sleep(0.6)
-        proc.send_signal(signal.SIGINT)
-        err = proc.stderr.read()
-        assert proc.wait(HANG_S) == 0, err
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
-    assert "Traceback" not in err, err
+    err = "\n".join(run.err)
     lines = err.splitlines()
     for shown in ("'Cam1'", "'cam\\n2'"):
         said = [x for x in lines if f"camera {shown} is not in the rig" in x]
