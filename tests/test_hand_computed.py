@@ -29,7 +29,7 @@ def _parabola() -> Motion:  # no bounce: the fit has no break, the problem is sm
         axis=1))
 
 
-def _dense_prior(ab: np.ndarray) -> np.ndarray:
+def dense_prior(ab: np.ndarray) -> np.ndarray:
     """The symmetric matrix of an upper band ``ab`` (``ab[-1 - d, j]`` = ``A[j - d, j]``)."""
     n = ab.shape[1]
     A = np.zeros((n, n))
@@ -38,6 +38,37 @@ def _dense_prior(ab: np.ndarray) -> np.ndarray:
         A[j - d, j] = ab[-1 - d, d:]
         A[j, j - d] = ab[-1 - d, d:]
     return A
+
+
+#: central differences' steps of the clocks' columns: s, ppm, s
+STEPS = {"offset": 1e-6, "drift": 1e-1, "readout": 1e-6}
+
+
+def dense_jacobian(problem, params, obs, control: np.ndarray, theta: np.ndarray,
+                   t0: float) -> tuple[np.ndarray, np.ndarray]:
+    """The reprojection residual ``r0`` (m,) at ``(control, theta)`` and its Jacobian
+    (m, n + q) by central differences: the n control-point coordinates (1 µm steps), then
+    the q clock unknowns of ``params.reduced`` (:data:`STEPS`); ``problem``'s times are left
+    at ``theta``'s. (benchmarks/session41/sync_prior_scale.py uses it too.)"""
+    def residual(c_flat: np.ndarray, th: np.ndarray) -> np.ndarray:
+        problem.set_times(params.times(obs, th) - t0)
+        r, _ = problem.project(problem.positions(c_flat.reshape(-1, 3)))
+        return r.reshape(-1)
+
+    c0 = control.reshape(-1).copy()
+    r0 = residual(c0, theta)
+    n, q = len(c0), len(params.reduced)
+    Jd = np.zeros((len(r0), n + q))
+    for k in range(n):  # control points (m), central differences
+        e = np.zeros(n)
+        e[k] = 1e-6
+        Jd[:, k] = (residual(c0 + e, theta) - residual(c0 - e, theta)) / 2e-6
+    for j, (_, p) in enumerate(params.reduced):
+        e = np.zeros(q)
+        e[j] = STEPS[p]
+        Jd[:, n + j] = (residual(c0, theta + e) - residual(c0, theta - e)) / (2 * STEPS[p])
+    problem.set_times(params.times(obs, theta) - t0)
+    return Jd, r0
 
 
 def test_sync_information_is_the_schur_complement_of_the_dense_information_by_differences():
@@ -68,30 +99,13 @@ def test_sync_information_is_the_schur_complement_of_the_dense_information_by_di
     q = len(params.reduced)
     assert q == 7 and S_code.shape == (q, q)
 
-    def residual(c_flat: np.ndarray, th: np.ndarray) -> np.ndarray:
-        problem.set_times(params.times(obs, th) - t0)
-        r, _ = problem.project(problem.positions(c_flat.reshape(-1, 3)))
-        return r.reshape(-1)
-
-    c0 = control.reshape(-1).copy()
-    r0 = residual(c0, theta)
-    n = len(c0)
-    Jd = np.zeros((len(r0), n + q))
-    for k in range(n):  # control points (m), central differences
-        e = np.zeros(n)
-        e[k] = 1e-6
-        Jd[:, k] = (residual(c0 + e, theta) - residual(c0 - e, theta)) / 2e-6
-    steps = {"offset": 1e-6, "drift": 1e-1, "readout": 1e-6}  # s, ppm, s
-    for j, (_, p) in enumerate(params.reduced):
-        e = np.zeros(q)
-        e[j] = steps[p]
-        Jd[:, n + j] = (residual(c0, theta + e) - residual(c0, theta - e)) / (2 * steps[p])
-    problem.set_times(params.times(obs, theta) - t0)
+    Jd, r0 = dense_jacobian(problem, params, obs, control, theta, t0)
+    n = control.size
     # the robust weights at (control, theta), Cauchy at c = 3σ, as the step weighs
     s2 = np.sum(r0.reshape(-1, 2) ** 2, axis=1) / sigma**2
     ww = np.repeat(1 / (1 + s2 / S._CAUCHY**2), 2) / sigma**2
     H = Jd.T @ (ww[:, None] * Jd)
-    H[:n, :n] += _dense_prior(problem.prior_ab)  # the motion prior: control points only
+    H[:n, :n] += dense_prior(problem.prior_ab)  # the motion prior: control points only
     schur = H[n:, n:] - H[n:, :n] @ np.linalg.solve(H[:n, :n], H[:n, n:])
     scale = np.sqrt(np.outer(np.diag(schur), np.diag(schur)))
     assert_allclose(S_code / scale, schur / scale, atol=2e-5)

@@ -11,7 +11,13 @@ central differences, as tests/test_hand_computed.py), the clocks' σ both ways.
 
 from __future__ import annotations
 
+import sys
+from pathlib import Path
+
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "tests"))
+from test_hand_computed import dense_jacobian, dense_prior
 
 from pslog import SimulationOptions, apply_timing, builtin_rig, simulate
 from pslog.estimation import sync as S
@@ -19,16 +25,6 @@ from pslog.estimation.trajectory import SmoothOptions, _Solver
 from pslog.motion import get_motion
 from pslog.records import NS
 from pslog.simulation import true_rig
-
-
-def dense_prior(ab):
-    n = ab.shape[1]
-    A = np.zeros((n, n))
-    for d in range(ab.shape[0]):
-        j = np.arange(d, n)
-        A[j - d, j] = ab[-1 - d, d:]
-        A[j, j - d] = ab[-1 - d, d:]
-    return A
 
 
 def one(seed: int, motion: str, estimate=("offset", "readout")):
@@ -55,25 +51,8 @@ def one(seed: int, motion: str, estimate=("offset", "readout")):
     out = S._joint_step(problem, _Solver(problem, options), obs, params.reduced, theta,
                         params, control, sigma_cov, dt, t0)
     sigma_med, S_med = out[2], out[6]
-    q = len(params.reduced)
-
-    def residual(c_flat, th):
-        problem.set_times(params.times(obs, th) - t0)
-        r, _ = problem.project(problem.positions(c_flat.reshape(-1, 3)))
-        return r.reshape(-1)
-
-    c0 = control.reshape(-1).copy()
-    r0 = residual(c0, theta)
-    n = len(c0)
-    Jd = np.zeros((len(r0), n + q))
-    for k in range(n):
-        e = np.zeros(n)
-        e[k] = 1e-6
-        Jd[:, k] = (residual(c0 + e, theta) - residual(c0 - e, theta)) / 2e-6
-    for j in range(q):
-        e = np.zeros(q)
-        e[j] = 1e-6
-        Jd[:, n + j] = (residual(c0, theta + e) - residual(c0, theta - e)) / 2e-6
+    Jd, r0 = dense_jacobian(problem, params, obs, control, theta, t0)
+    n = control.size
     s2 = np.sum(r0.reshape(-1, 2) ** 2, axis=1) / sigma_med**2
     ww = np.repeat(1 / (1 + s2 / S._CAUCHY**2), 2) / sigma_med**2
     Hd = Jd.T @ (ww[:, None] * Jd)
