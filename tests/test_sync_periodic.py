@@ -6,10 +6,11 @@ a word."""
 from __future__ import annotations
 
 import re
+from pathlib import Path
 
 import numpy as np
 import pytest
-from _cli import pslog as _pslog
+from _cli import pslog_ok
 
 from pslog import read_session
 from pslog.estimation.sync import motion_period
@@ -33,6 +34,16 @@ def _circle(period_s: float, fps: float = 30.0, seconds: float = 6.0) -> Observa
         rows.append((np.round(t * NS).astype(np.int64), np.full(len(t), c), uv))
     t, cam, uv = (np.concatenate(x) for x in zip(*rows, strict=True))
     return Observations.from_unsorted(t, cam, uv)
+
+
+def _synced(tmp_path, motion: str, noise_px: str, cam2_ms: str, seed: str) -> tuple[str, Path]:
+    """A 10-s ``paper3`` type-A session of ``motion`` simulated with camera 2's clock
+    ``cam2_ms`` off and synced: sync's standard output and the synced copy's path."""
+    path, out = tmp_path / f"{motion}.mcap", tmp_path / "synced.mcap"
+    pslog_ok("simulate", "--rig", "paper3", "--timing", "typeA", "--motion", motion,
+             "--duration", "10", "--noise-px", noise_px, "--clock-offset", f"cam2={cam2_ms}",
+             "--seed", seed, "-o", path)
+    return pslog_ok("sync", path, "-o", out), out
 
 
 @pytest.mark.parametrize("period_s", [0.45, 0.8, 2.05])
@@ -83,34 +94,20 @@ def test_simulated_motions(motion, seconds, periodic):
 def test_sync_says_a_turntable_leaves_its_offsets_ambiguous(tmp_path):
     """The rig's clock 2 s from camera 2's truth: sync lands on an alias (a whole number of
     periods from the truth) and says so, with the period."""
-    path = tmp_path / "turntable.mcap"
-    done = _pslog("simulate", "--rig", "paper3", "--timing", "typeA", "--motion", "turntable",
-                  "--duration", "10", "--noise-px", "0.3", "--clock-offset", "cam2=2000",
-                  "--seed", "68201", "-o", path)
-    assert done.returncode == 0, done.stderr
-    out = tmp_path / "synced.mcap"
-    done = _pslog("sync", path, "-o", out)
-    assert done.returncode == 0, done.stderr
-    said = re.search(r"motion repeats every ([\d.]+) ms", done.stdout)
-    assert said, done.stdout
+    stdout, out = _synced(tmp_path, "turntable", "0.3", "2000", "68201")
+    said = re.search(r"motion repeats every ([\d.]+) ms", stdout)
+    assert said, stdout
     period = float(said.group(1)) / 1e3
     assert period == pytest.approx(TURNTABLE_S, abs=1e-3)
     offset = read_session(out).rig.cameras[1].clock_offset
     turns = (2.0 - offset) / TURNTABLE_S
     assert abs(offset - 2.0) > 0.5 and turns == pytest.approx(round(turns), abs=2e-3)
-    named = re.search(r"cam2 ([+-][\d.]+) ms", done.stdout)  # (the alias written, named)
+    named = re.search(r"cam2 ([+-][\d.]+) ms", stdout)  # (the alias written, named)
     assert named and float(named.group(1)) / 1e3 == pytest.approx(offset, abs=1e-5)
 
 
 def test_sync_of_a_rally_says_nothing_of_a_period(tmp_path):
-    path = tmp_path / "rally.mcap"
-    done = _pslog("simulate", "--rig", "paper3", "--timing", "typeA", "--motion", "rally",
-                  "--duration", "10", "--noise-px", "0.3", "--clock-offset", "cam2=4",
-                  "--seed", "68202", "-o", path)
-    assert done.returncode == 0, done.stderr
-    done = _pslog("sync", path, "-o", tmp_path / "synced.mcap")
-    assert done.returncode == 0, done.stderr
-    assert "repeats" not in done.stdout
+    assert "repeats" not in _synced(tmp_path, "rally", "0.3", "4", "68202")[0]
 
 
 def test_a_turntable_after_a_long_rest_is_periodic_and_a_rally_after_one_is_not():
@@ -134,13 +131,7 @@ def test_sync_says_a_noisy_turntable_leaves_its_offsets_ambiguous(tmp_path):
     """review41b: at 1.5 px pixel noise the distance of a pair of detections a period apart
     exceeds 3 px in about half the pairs: no period was found, the alias written without a
     word. The tolerance now widens to 4 σ of the noise sync estimated."""
-    path = tmp_path / "turntable.mcap"
-    done = _pslog("simulate", "--rig", "paper3", "--timing", "typeA", "--motion", "turntable",
-                  "--duration", "10", "--noise-px", "1.5", "--clock-offset", "cam2=1000",
-                  "--seed", "69607", "-o", path)
-    assert done.returncode == 0, done.stderr
-    done = _pslog("sync", path, "-o", tmp_path / "synced.mcap")
-    assert done.returncode == 0, done.stderr
-    said = re.search(r"motion repeats every ([\d.]+) ms", done.stdout)
-    assert said, done.stdout
+    stdout = _synced(tmp_path, "turntable", "1.5", "1000", "69607")[0]
+    said = re.search(r"motion repeats every ([\d.]+) ms", stdout)
+    assert said, stdout
     assert float(said.group(1)) / 1e3 == pytest.approx(TURNTABLE_S, abs=0.01)
