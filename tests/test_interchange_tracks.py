@@ -214,6 +214,18 @@ def test_c3d_of_regular_times_leaves_nothing_out(fused, tmp_path, cli):
     assert code == 0 and "left out" not in out, err
 
 
+def _pair_rig(cli, folder, fps: float, cam2_offset_s: float):
+    """``paper2``'s two cameras at ``fps``, camera 2's shutter ``cam2_offset_s`` after camera
+    1's: the rig file written in ``folder``."""
+    code, text, err = cli("rig", "show", "paper2")
+    assert code == 0, err
+    head, cam2 = text.replace("fps = 30.0", f"fps = {fps}").split('name = "cam2"')
+    rig = folder / "pair.toml"
+    rig.write_text(head + 'name = "cam2"' + cam2.replace("offset = 0.0",
+                                                         f"offset = {cam2_offset_s}"))
+    return rig
+
+
 @pytest.mark.filterwarnings("ignore:No analog data found")
 def test_c3d_of_an_uneven_pair_holds_every_point_on_a_finer_grid(tmp_path, cli):
     """Two 60 fps cameras whose shutters are 4 ms apart (and so 12.7 ms the other way), the
@@ -224,12 +236,7 @@ def test_c3d_of_an_uneven_pair_holds_every_point_on_a_finer_grid(tmp_path, cli):
     c3d = pytest.importorskip("c3d")
     from pslog.interchange.track_formats import c3d_grid
 
-    rig_text = subprocess.run([sys.executable, "-m", "pslog", "rig", "show", "paper2"],
-                              capture_output=True, text=True, timeout=120).stdout
-    rig_text = rig_text.replace("fps = 30.0", "fps = 60.0")
-    head, cam2 = rig_text.split('name = "cam2"')
-    rig = tmp_path / "pair.toml"
-    rig.write_text(head + 'name = "cam2"' + cam2.replace("offset = 0.0", "offset = 0.004"))
+    rig = _pair_rig(cli, tmp_path, 60.0, 0.004)
     sim, fused_path, path = tmp_path / "s.mcap", tmp_path / "f.mcap", tmp_path / "t.c3d"
     assert cli("simulate", "--rig", rig, "--motion", "throw", "--noise-px", "0.3",
                "--miss-rate", "0.2", "--seed", "68500", "-o", sim)[0] == 0
@@ -265,11 +272,7 @@ def test_c3d_of_a_close_pair_with_misses_leaves_nothing_out(tmp_path, cli):
     pytest.importorskip("c3d")
     from pslog.interchange.track_formats import c3d_grid
 
-    rig_text = subprocess.run([sys.executable, "-m", "pslog", "rig", "show", "paper2"],
-                              capture_output=True, text=True, timeout=120).stdout
-    head, cam2 = rig_text.split('name = "cam2"')
-    rig = tmp_path / "pair.toml"
-    rig.write_text(head + 'name = "cam2"' + cam2.replace("offset = 0.0", "offset = 0.003"))
+    rig = _pair_rig(cli, tmp_path, 30.0, 0.003)
     sim, fused_path, path = tmp_path / "s.mcap", tmp_path / "f.mcap", tmp_path / "t.c3d"
     assert cli("simulate", "--rig", rig, "--motion", "throw", "--noise-px", "0.3",
                "--miss-rate", "0.1", "--seed", "69300", "-o", sim)[0] == 0
