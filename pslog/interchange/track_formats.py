@@ -297,7 +297,8 @@ def c3d_grid(session) -> tuple[float, int, int]:
 
     chosen = grid(rate)
     total = sum(len(t) for t in tracks.values())
-    if left_out(rate, chosen[1]) <= C3D_SHARED_SHARE * total:
+    lost_chosen = left_out(rate, chosen[1])
+    if lost_chosen <= C3D_SHARED_SHARE * total:
         return chosen
     # points left out: the multiples of the cameras' frame rates, lowest first, as fine as
     # C3D's frames allow (review41b: two 30 fps cameras 3 ms apart, a tenth of the ball
@@ -310,7 +311,7 @@ def c3d_grid(session) -> tuple[float, int, int]:
     lost = [left_out(r, first) for r, first, _n in found]
     least = min(lost, default=total)
     for (r, first, n), k in zip(found, lost, strict=True):
-        if k <= least + C3D_SHARED_SHARE * total and k < left_out(rate, chosen[1]) and (
+        if k <= least + C3D_SHARED_SHARE * total and k < lost_chosen and (
                 _coherence(densest.time_ns, r) >= C3D_COHERENT):
             return r, first, n
     return chosen
