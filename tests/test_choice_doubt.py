@@ -14,7 +14,7 @@ from _rally import rally
 from _rigs import ring_rig
 from numpy.testing import assert_allclose, assert_array_equal
 
-from pslog.evaluation import assess
+from pslog.evaluation import assess, errors_m
 from pslog.fusion import FusionOptions, fuse
 from pslog.fusion._prepare import prepare
 from pslog.fusion.gating import (
@@ -137,12 +137,15 @@ def _cut(det: Detections, t0: float, t1: float) -> Detections:
 
 
 @pytest.fixture(scope="module")
-def object_chosen():
+def object_on_the_line():
     """paper2, two cameras: camera 1 loses the ball near a static orange object it sees all
     along; at 3.25 s its one candidate, the object, 0.1 s after the motion gate last
-    rejected it, lies on the epipolar line of camera 0's ball and is chosen: ``nearest``
-    makes a point 3.3 m from the ball whose rays meet within 3 mm (bench_dirty --more's
-    rally-401, the 2 s around it)."""
+    rejected it, lies on the epipolar line of camera 0's ball (bench_dirty --more's
+    rally-401, the 2 s around it). Until session 42 it was chosen, in doubt (beside its
+    camera's recent rejections): ``nearest`` made a point 3.3 m from the ball whose rays
+    met within 3 mm, NEES above 1000 without the doubt's variance, below 2 with it. Its
+    rays miss there (no point), and the image test now judges it with the tolerance of the
+    point known at its pixel (``gating._borrowed_tolerance``): rejected, nothing in doubt."""
     rig = apply_timing(builtin_rig("paper2"), "typeA")
     seed = 401
     motion, _ = rally(8.0, seed=seed, speed=4.0 + seed % 3, kick_every_s=0.9)
@@ -153,23 +156,22 @@ def object_chosen():
     return rig, _cut(det, 2.0, 4.0), truth
 
 
-def test_a_dirty_sessions_nearest_covariance_is_calibrated_with_the_doubt_not_without(
-        object_chosen):
-    rig, det, truth = object_chosen
+def test_a_dirty_sessions_object_on_the_line_is_rejected_and_nearest_stays_calibrated(
+        object_on_the_line):
+    rig, det, truth = object_on_the_line
     options = FusionOptions()
     gated = gate_for(det, rig, "nearest", options)
     # (the cut session's start, before the track first predicts: camera 1's choices among
-    # its ball and the object are contested, "A contested start"; then the object at 3.25 s)
+    # its ball and the object are contested, "A contested start"; the object at 3.25 s no
+    # longer chosen: no later choice in doubt)
     start = gated.observations.time_ns < 2.1e9
-    assert gated.doubt_px2 is not None and np.count_nonzero(gated.doubt_px2[~start]) == 1
+    assert gated.doubt_px2 is not None and np.count_nonzero(gated.doubt_px2[~start]) == 0
     assert np.count_nonzero(gated.doubt_px2[start]) == np.count_nonzero(
         gated.reason == CONTESTED) == 2
-    without = assess(fuse(gated.observations, rig, "nearest", options), truth)[1]
     track = fuse(det, rig, "nearest", options)
-    with_doubt = assess(track, truth)[1]
-    assert without.nees > 1000  # one point 3.3 m off with a std of 13 cm
-    assert with_doubt.nees < 2.0
-    assert with_doubt.within_2sigma == without.within_2sigma  # (only that point moved)
+    summary = assess(track, truth)[1]
+    assert summary.nees < 2.0 and summary.within_2sigma > 0.9
+    assert np.nanmax(errors_m(track, truth)) < 1.0  # (3.3 m before)
     # the stream (StreamDoubt) gives the batch's bits
     fuser = StreamFuser(rig, "nearest", options, candidates=True)
     out = []

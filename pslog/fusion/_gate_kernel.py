@@ -470,6 +470,30 @@ def static_camera(times, table, points, uv, finite, paired, dz, lags, long_lags,
             dd = (ex * ex + ey * ey) + ez * ez
             own = focal_static / (math.sqrt(dd) if dd >= 0 else math.nan)
             tol = own if paired[r] else math.nan
+            borrowed = False
+            if not own == own:  # gating._borrowed_tolerance: a point known at its pixel
+                for lag in range(1, lags + 1):
+                    if f < lag:
+                        break
+                    if not times[f] - times[f - lag] <= recent_ns:
+                        continue
+                    found = math.inf
+                    for q2 in range(k_max):
+                        r2 = table[f - lag, q2]
+                        if r2 < 0:
+                            continue
+                        px, py, pz = points[r2, 0], points[r2, 1], points[r2, 2]
+                        if px == px and py == py and pz == pz:
+                            fx, fy, fz = px - center[0], py - center[1], pz - center[2]
+                            dd2 = (fx * fx + fy * fy) + fz * fz
+                            own2 = focal_static / (math.sqrt(dd2) if dd2 >= 0 else math.nan)
+                            du, dv = u - uv[r2, 0], v - uv[r2, 1]
+                            if math.sqrt(du * du + dv * dv) <= own2 and own2 < found:
+                                found = own2
+                    if found < math.inf:
+                        own = tol = found  # (its long test too: lone, not static)
+                        borrowed = True
+                        break
             run = run_px = held = run_long = 0.0
             for lag in range(1, top + 1):
                 if f < lag:
@@ -521,7 +545,10 @@ def static_camera(times, table, points, uv, finite, paired, dz, lags, long_lags,
             across = 1.0 - dzr * dzr
             g_across = g * (math.sqrt(across) if across >= 0 else math.nan)
             long = run_long >= long_lags and long_c * g_across * long_t * long_t > static_m
-            if run >= 0.75 * lags or (alone and tol == tol) or long:
+            if borrowed:
+                if long:
+                    lone[r] = own
+            elif run >= 0.75 * lags or (alone and tol == tol) or long:
                 static[r] = True
 
 
@@ -1084,6 +1111,26 @@ def decide_at(a, at, fi, fflag, ct, cf, csup, count, trk, ist, F, centers, k_inv
         alive[j] = 1.0 if tol[j] == tol[j] else 0.0
         if alive[j] != 0.0:
             n_alive += 1
+        if not own_tol[j] == own_tol[j]:  # gating._borrowed_tolerance (the image test's)
+            u, v = cf[a, at, j, 0], cf[a, at, j, 1]
+            for lg in range(1, n_back + 1):
+                h = at - lg
+                if not key - fi[a, h, 0] <= recent_ns:
+                    continue
+                found = math.inf
+                for q in range(fi[a, h, 3]):
+                    px, py, pz = cf[a, h, q, 5], cf[a, h, q, 6], cf[a, h, q, 7]
+                    if px == px and py == py and pz == pz:
+                        dx, dy, dz = px - centers[a, 0], py - centers[a, 1], pz - centers[a, 2]
+                        own = still_f[a] * static_m / _sqrt((dx * dx + dy * dy) + dz * dz)
+                        du, dv = u - cf[a, h, q, 0], v - cf[a, h, q, 1]
+                        if _sqrt(du * du + dv * dv) <= own and own < found:
+                            found = own
+                if found < math.inf:
+                    own_tol[j] = tol[j] = found  # (its long test too: lone, not static)
+                    alive[j] = 1.0
+                    n_alive += 1
+                    break
     for lg in range(1, n_walk + 1):
         if lg > la and n_alive == 0:
             break  # (the long image test's frames: nothing left to test)
@@ -1147,15 +1194,22 @@ def decide_at(a, at, fi, fflag, ct, cf, csup, count, trk, ist, F, centers, k_inv
     for j in range(k):
         alone = (run_px[j] >= la) and (held[j] < la - 1)  # gating._still_alone
         lone[j] = own_tol[j] if alone else math.nan
+        # (a candidate without a point judged with a borrowed tolerance: lone, not static)
+        borrowed = not cf[a, at, j, 5] == cf[a, at, j, 5] and own_tol[j] == own_tol[j]
         still = (run[j] >= 0.75 * la) or (alone and tol[j] == tol[j])
         # gating._still_long: longer than a ball in flight can stay still across its ray
         dz = cf[a, at, j, 4]
-        if not still and n_alive > 0 and alive[j] != 0.0 and dz * dz <= 1.0:
+        if (borrowed or not still) and n_alive > 0 and alive[j] != 0.0 and dz * dz <= 1.0:
             t_long = long_t[a]
             g_across = opt[O_G] * _sqrt(1.0 - dz * dz)
-            still = (run_long[j] >= long_lags[a]) and (
+            long = (run_long[j] >= long_lags[a]) and (
                 opt[O_LONG_STILL_C] * g_across * t_long * t_long > static_m)
-        static[j] = 1.0 if still else 0.0
+            if borrowed:
+                if long:
+                    lone[j] = own_tol[j]
+            else:
+                still = long
+        static[j] = 1.0 if still and not borrowed else 0.0
         run[j] = run[j] / la  # the stillness
     # ---- gating._columns
     for j in range(k):

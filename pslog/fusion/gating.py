@@ -734,6 +734,12 @@ def _static(c: _Candidates, tables, rig: Rig, options: GatingOptions,
             tol[:] = np.nan
         else:
             tol[~paired[np.maximum(table, 0)]] = np.nan
+        # the image test's counts of a candidate without a point are made with the
+        # tolerance of a point known at its pixel (:func:`_borrowed_tolerance`)
+        own_px = _borrowed_tolerance(times, table, y, own, lags, options)
+        # and its long test too, as a paired one's (its verdict: lone, not static)
+        borrowed = np.isnan(own) & ~np.isnan(own_px)
+        tol[borrowed] = own_px[borrowed]
         run_px = np.zeros(table.shape)
         held = np.zeros(table.shape)
         for lag in range(1, min(long_lags, len(times) - 1) + 1):
@@ -769,14 +775,14 @@ def _static(c: _Candidates, tables, rig: Rig, options: GatingOptions,
             d = np.where(valid & np.isfinite(d), d, np.inf).min(axis=2)
             with np.errstate(invalid="ignore"):
                 # a still pixel there whose own support held too (its point, or _held's)
-                near = valid & (d_px <= own[:, :, None])
+                near = valid & (d_px <= own_px[:, :, None])
             held += recent[:, None] & np.any(
                 near & _lagged(p_finite, lag, finite[0])[:, None, :], axis=2)
             d_px_pair = d_px
             d_px = np.where(valid & np.isfinite(d_px), d_px, np.inf).min(axis=2)
             run += recent[:, None] & (d <= options.static_m)
             with np.errstate(invalid="ignore"):
-                run_px += recent[:, None] & (d_px <= own)
+                run_px += recent[:, None] & (d_px <= own_px)
                 run_long += recent_long[:, None] & _still_pair(
                     d_px_pair, tol, _lagged(own, lag, own[0]), valid)
         ok = table >= 0
@@ -787,9 +793,52 @@ def _static(c: _Candidates, tables, rig: Rig, options: GatingOptions,
         with np.errstate(invalid="ignore"):
             long = _still_long(run_long, dz, long_lags, rig.cameras[b].fps, options, np.sqrt)
         alone = _still_alone(run_px, held, lags)
-        static[table[ok & ((run >= 0.75 * lags) | (alone & ~np.isnan(tol)) | long)]] = True
-        lone[table[ok & alone]] = own[ok & alone]
+        judged = ok & ~borrowed
+        static[table[judged & ((run >= 0.75 * lags) | (alone & ~np.isnan(tol)) | long)]] = True
+        lone_px = ok & (alone | (borrowed & long))
+        lone[table[lone_px]] = own_px[lone_px]
     return static, stillness, lone
+
+
+def _borrowed_tolerance(times, table, y, own, lags: int, options: GatingOptions):
+    """(frames, K): each candidate's image tolerance for :func:`_static`'s image test
+    (``own``, its :func:`_still_px`), and for one without a point (NaN there: the 3D and
+    paired tests cannot judge it) the tolerance of a point known at its pixel: the smallest
+    ``own`` of the candidates of its camera's newest frame within ``static_s`` (of the
+    test's ``lags``, within 1.5 ``static_s``) that lie within their own tolerance of it;
+    NaN where none does. A static object whose support comes and goes has no point in the
+    frames where the rays do not meet (the ball seen by one other camera, kicked between
+    its two frames: ``paper3``, ``bench_dirty.py --more --first-seed 72300``,
+    ``rally-72307`` at 6.34 s; judged static in the frames before and after, the object
+    was chosen there, and ``smooth`` made 8 points 4.3-4.9 m off at a ``std_m`` of 2-9 mm).
+    Its pixel stands where its point stood, so the image tests judge it with that point's
+    tolerance: :func:`_still_alone` (its support not continuous) and :func:`_still_long`
+    (still longer than a ball in flight can be: the ball ran along the object's epipolar line
+    for 0.3 s there, and a blob of the third camera, carried, supported it too), and either
+    verdict makes it ``lone`` (kept only where its camera followed the ball to that pixel),
+    not static: its depth is not known. ``times`` (frames,) ns, ``table`` (frames, K)
+    candidate rows (-1 padding), ``y`` (frames, K, 2) undistorted pixels."""
+    out = own.copy()
+    need = np.isnan(own) & (table >= 0)
+    for lag in range(1, min(lags, len(times) - 1) + 1):
+        if not need.any():
+            break
+        recent = np.zeros(len(times), dtype=bool)
+        recent[lag:] = times[lag:] - times[:-lag] <= 1.5 * options.static_s * NS
+        prev = np.full(table.shape, -1)
+        prev[lag:] = table[:-lag]
+        yy = _lagged(y, lag, y[0])
+        prev_own = _lagged(own, lag, own[0])[:, None, :]
+        with np.errstate(invalid="ignore"):
+            du = y[:, :, None, 0] - yy[:, None, :, 0]
+            dv = y[:, :, None, 1] - yy[:, None, :, 1]
+            d_px = np.sqrt(du * du + dv * dv)
+            reach = (prev[:, None, :] >= 0) & (d_px <= prev_own)
+        found = np.where(reach, prev_own, np.inf).min(axis=2)
+        fill = need & recent[:, None] & (found < np.inf)
+        out[fill] = found[fill]
+        need &= ~fill
+    return out
 
 
 
@@ -2075,6 +2124,30 @@ def _stillness_one(key: int, pts, earlier, lags: int, options: GatingOptions,
             if cam is not None and math.isfinite(x) else math.nan for x, y, z in pts]
     tols = [own if cam is not None and paired[j] else math.nan
             for j, own in enumerate(owns)]
+    # the image test's counts: a candidate without a point borrows the tolerance of one
+    # known at its pixel (:func:`_borrowed_tolerance`)
+    owns_px = list(owns)
+    for j in range(len(pts) if cam is not None else 0):
+        if owns[j] == owns[j]:
+            continue
+        u, v = uvs[j]
+        for n, (prev_key, prev_points, prev_uvs, _) in enumerate(earlier, start=1):
+            if n > lags:
+                break
+            if not key - prev_key <= 1.5 * options.static_s * NS:
+                continue
+            found = math.inf
+            for (pu, pv), (px, py, pz) in zip(prev_uvs, prev_points, strict=True):
+                if px == px and py == py and pz == pz:
+                    own = _still_px(cam, px, py, pz, options, _sqrt)
+                    du, dv = u - pu, v - pv
+                    if _sqrt(du * du + dv * dv) <= own and own < found:
+                        found = own
+            if found < math.inf:
+                owns_px[j] = found
+                tols[j] = found  # (its long test too, as a paired one's: lone, not static)
+                break
+    borrowed = [owns[j] != owns[j] and owns_px[j] == owns_px[j] for j in range(len(pts))]
     # the candidates still across their ray in every frame so far (only they can pass the
     # long test, which asks for every one of its frames)
     alive = [t == t for t in tols]  # (an image test: not NaN)
@@ -2092,7 +2165,7 @@ def _stillness_one(key: int, pts, earlier, lags: int, options: GatingOptions,
             best_px = math.inf
             supported = False
             still_long = False
-            if owns[j] == owns[j]:  # (an image test: not NaN)
+            if owns_px[j] == owns_px[j]:  # (an image test: not NaN)
                 u, v = uvs[j]
                 for i, ((pu, pv), (px, py, pz)) in enumerate(zip(prev_uvs, prev_points,
                                                                  strict=True)):
@@ -2101,7 +2174,7 @@ def _stillness_one(key: int, pts, earlier, lags: int, options: GatingOptions,
                     if d < best_px:
                         best_px = d
                     finite = px == px and py == py and pz == pz
-                    if d <= owns[j] and (finite if prev_held is None else prev_held[i]):
+                    if d <= owns_px[j] and (finite if prev_held is None else prev_held[i]):
                         supported = True
                     # _still_pair: the smaller of the two candidates' tolerances
                     pair = tols[j]
@@ -2127,18 +2200,23 @@ def _stillness_one(key: int, pts, earlier, lags: int, options: GatingOptions,
                 held[j] += 1.0
             if best <= options.static_m:
                 run[j] += 1.0
-            if best_px <= owns[j]:
+            if best_px <= owns_px[j]:
                 run_px[j] += 1.0
     alone = _still_alone(run_px, held, lags)
-    static = (run >= 0.75 * lags) | (alone & ~np.isnan(np.array(tols)))
-    lone = np.where(alone, owns, math.nan)
+    static = ((run >= 0.75 * lags) | (alone & ~np.isnan(np.array(tols)))) & ~np.array(
+        borrowed, dtype=bool)
+    lone = np.where(alone, owns_px, math.nan)
     if cam is not None and dz is not None and any(alive):
         long_lags = int(np.ceil(LONG_STILL * options.static_s * cam.fps))
         for j in range(len(pts)):
             dz_j = float(dz[j])
             if alive[j] and dz_j * dz_j <= 1.0:  # (np.sqrt's NaN in _static: not static)
-                static[j] |= bool(_still_long(run_long[j], dz_j, long_lags, cam.fps, options,
-                                              _sqrt))
+                long = bool(_still_long(run_long[j], dz_j, long_lags, cam.fps, options, _sqrt))
+                if borrowed[j]:
+                    if long:
+                        lone[j] = owns_px[j]
+                else:
+                    static[j] |= long
     return static, run / lags, lone
 
 
