@@ -42,15 +42,28 @@ def _session(kind: str):
     return rig, track, truth, ball
 
 
-def test_the_issue_session_ends_before_the_static_object():
+def test_the_issue_session_ends_before_the_static_object(monkeypatch):
     """Before: 368, 706 and 1044 mm at 1.4000 (lab4-1), 1.4167 (lab4-3), 1.4333 s (lab4-1),
     faults / clean 3.19. Now no point beyond 5 cm, the ratio under 1.05: the piece ends
-    before the static object's last detection, which gets no point (counted)."""
+    before the static object's last detection, which gets no point (counted). Since session
+    42 the gate no longer chooses the object there (its rays miss at 1.4000 and 1.4333 s, and
+    the image tests judge it with the tolerance of the point known at its pixel:
+    ``gating._borrowed_tolerance``); the piece's end test is the safety net where a gate
+    does choose it, so it is tested on the gate's choices without that rule."""
+    import pslog.fusion.gating as gating
+
+    _, gated, _, _ = _session("dirty")
+    assert "underdetermined_end" not in gated.dropped  # nothing chosen there to leave out
+    monkeypatch.setattr(gating, "_kernels", lambda n, wait=False: False)  # (numpy _static)
+    monkeypatch.setattr(gating, "_borrowed_tolerance",
+                        lambda times, table, y, own, lags, options: own)
     rig, track, truth, ball = _session("dirty")
+    monkeypatch.undo()
     _, clean, clean_truth, _ = _session("clean")
-    err = errors_m(track, truth)
-    assert np.max(err) < 0.05
-    assert np.mean(err) / np.mean(errors_m(clean, clean_truth)) < 1.05
+    for fused in (gated, track):
+        err = errors_m(fused, truth)
+        assert np.max(err) < 0.05
+        assert np.mean(err) / np.mean(errors_m(clean, clean_truth)) < 1.05
     assert track.dropped.get("underdetermined_end", 0) >= 1
     t_end = 1.4333e9
     assert not np.any(np.abs(track.time_ns - t_end) < 1e6)  # the static object's: no point
