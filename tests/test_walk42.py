@@ -77,3 +77,58 @@ def test_view_says_a_fused_file_of_the_synced_copy_is_shown_on_the_session_clock
     assert f"'pslog view {fused}' shows it with the clocks it was fused with" in said, said
     alone = pslog_ok("view", fused, "--frames", "none", "--save", tmp_path / "alone.rrd")
     assert "synced copy" not in alone, alone
+
+
+# ---- a detection beyond the lens model's fold-over: sync and smooth without gating ---------
+
+def _folding_sessions(tmp_path):
+    """A 6 s paper3 rally seen through a barrel lens that folds over inside the image
+    (k1 -0.5: no ray beyond 326 px from the centre), as a webcam's chessboard calibration
+    gave walk42 (k3 -0.46, folding in the image's corner), three of cam1's detections moved
+    to its corners (a blob there: no ray); and the same session without those rows."""
+    from pslog import Rig, SimulationOptions, apply_timing, builtin_rig, get_motion, simulate
+    from pslog.log import SessionWriter
+    from pslog.records import Detections, Observations
+    from pslog.timing import observations as timed_observations
+
+    rig = apply_timing(builtin_rig("paper3"), "typeA")
+    rig = Rig(tuple(c.replace(dist=np.array([-0.5, 0.0, 0.0, 0.0, 0.0])) for c in rig.cameras),
+              rig.name)
+    det, _ = simulate(rig, get_motion("rally"), 6.0,
+                      SimulationOptions(noise_px=0.3, seed=70042))
+    obs = timed_observations(det, rig)
+    rows = np.flatnonzero(obs.camera == 0)[[20, 70, 120]]
+    uv = obs.uv.copy()
+    uv[rows] = [[4.0, 3.0], [636.0, 476.0], [5.0, 470.0]]
+    assert not np.isfinite(rig.cameras[0].undistort_normalized(uv[rows])).any()
+    keep = np.ones(len(obs), dtype=bool)
+    keep[rows] = False
+    paths = []
+    for name, o in (("corners", Observations(obs.time_ns, obs.camera, uv, obs.frame_index)),
+                    ("without", obs.select(keep))):
+        path = tmp_path / f"{name}.mcap"
+        with SessionWriter(path, rig, timing="typeA", source="test") as writer:
+            writer.add_detections(Detections.from_observations(rig.names, o))
+        paths.append(path)
+    return paths
+
+
+def test_sync_and_smooth_take_a_detection_without_a_ray_as_a_missing_one(tmp_path):
+    """walk42: a session imported from a lab's detector, its cam1 calibrated by `pslog
+    calibrate --chessboard` with a k3 that folds over in the image's corner: `pslog sync`
+    failed ("no stretch of the session is seen by it and camera cam1 together long enough
+    to scan its offset", or "information matrix not positive definite"), as did `pslog fuse
+    --method smooth --gating off`: the NaN rays of two corner detections entered the fits'
+    linear start. Both now leave them out, as every fusion method does (docs/methods.md, "A
+    detection without a ray"): sync's clocks are those of the session without them."""
+    import json
+
+    corners, without = _folding_sessions(tmp_path)
+    got = json.loads(pslog_ok("sync", corners, "-o", tmp_path / "c_synced.mcap", "--estimate",
+                              "offset", "--json"))
+    want = json.loads(pslog_ok("sync", without, "-o", tmp_path / "w_synced.mcap",
+                               "--estimate", "offset", "--json"))
+    assert got["cameras"] == want["cameras"]
+    said = pslog_ok("fuse", corners, "--method", "smooth", "--gating", "off", "-o",
+                    tmp_path / "c_fused.mcap")
+    assert said.startswith("smooth"), said
