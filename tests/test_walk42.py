@@ -132,3 +132,42 @@ def test_sync_and_smooth_take_a_detection_without_a_ray_as_a_missing_one(tmp_pat
     said = pslog_ok("fuse", corners, "--method", "smooth", "--gating", "off", "-o",
                     tmp_path / "c_fused.mcap")
     assert said.startswith("smooth"), said
+
+
+# ---- calibrate: a lens model that folds over inside the image is said ------------------------
+
+def test_calibrate_says_a_lens_model_folding_over_inside_the_image(tmp_path):
+    """walk42: cam1's chessboard calibration (the board near the image's centre) gave k3
+    -0.46, whose model folds over in the image's corners: detections there have no ray, and
+    nothing said so. `pslog calibrate` now names the share of the image without a ray; a
+    lens that does not fold (k1 -0.18 alone) gets no such note. And "1 points lie outside"
+    is "1 point lies outside"."""
+    rig = tmp_path / "lab.toml"
+    rig.write_text(
+        'name = "lab"\n'
+        '[[camera]]\nname = "cam1"\nwidth = 640\nheight = 480\n'
+        'K = [[520.86, 0.0, 318.49], [0.0, 521.29, 242.64], [0.0, 0.0, 1.0]]\n'
+        'dist = [-0.18281, 0.23814, 0.00038, 0.00099, -0.46121]\n'
+        'R = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]\nt = [0.0, 0.0, 0.0]\n'
+        'fps = 30.0\noffset = 0.0\n')
+    from pslog.rig import load_rig
+
+    cam = load_rig(rig).cameras[0]
+    # floor points 3 m before the camera (world = camera frame here), one beyond the image
+    xs, ys = np.meshgrid(np.linspace(-0.9, 0.9, 5), np.linspace(-0.6, 0.6, 4))
+    world = np.c_[xs.ravel(), ys.ravel(), 3.0 + 0.2 * xs.ravel()]
+    world = np.r_[world, [[0.0, 2.0, 3.0]]]
+    uv = cam.project(world)[0]
+    points = tmp_path / "points.csv"
+    points.write_text("x,y,z,u,v\n" + "".join(
+        ",".join(map(repr, [*map(float, p), *map(float, q)])) + "\n"
+        for p, q in zip(world, uv, strict=True)))
+    said = pslog_ok("calibrate", "--points", points, "--fix-intrinsics", "--name", "cam1",
+                    "--rig", rig)
+    assert "note: the lens model folds over inside the image: 1.9% of it" in said, said
+    assert "note: 1 point lies outside the 640x480 image" in said, said
+    text = rig.read_text().replace("-0.46121", "0.0").replace("0.23814", "0.0")
+    rig.write_text(text)
+    said = pslog_ok("calibrate", "--points", points, "--fix-intrinsics", "--name", "cam1",
+                    "--rig", rig, "--force")
+    assert "folds over" not in said, said
