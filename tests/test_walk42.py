@@ -171,3 +171,30 @@ def test_calibrate_says_a_lens_model_folding_over_inside_the_image(tmp_path):
     said = pslog_ok("calibrate", "--points", points, "--fix-intrinsics", "--name", "cam1",
                     "--rig", rig, "--force")
     assert "folds over" not in said, said
+
+
+# ---- info: a synced session's shutters off the rig's planned offsets -------------------------
+
+def test_info_of_a_synced_session_does_not_call_its_clocks_off(tmp_path):
+    """walk42: webcams whose rig planned no phases (offsets 0, as `pslog calibrate` writes
+    them), synced: `pslog info synced.mcap` said "shutters off the rig's offsets (...): camera
+    clocks off, or the rig's offsets not the cameras'", though its clock model corrects the
+    clocks and the phases are measured on the corrected times. It now says the cameras fire
+    there, not where the offsets plan, and how to set them; the unsynced session keeps its
+    line and the `pslog sync` command."""
+    sim, det, rig = tmp_path / "sim.mcap", tmp_path / "det.csv", tmp_path / "rig.toml"
+    lab, synced = tmp_path / "lab.mcap", tmp_path / "synced.mcap"
+    pslog_ok("simulate", "--rig", "paper3", "--timing", "typeA", "--motion", "rally",
+             "--duration", "4", "--noise-px", "0.3", "--clock-offset", "cam2=3.4",
+             "--seed", "70044", "-o", sim)
+    pslog_ok("export", sim, "--detections", det)
+    rig.write_text(pslog_ok("rig", "show", "paper3", "--timing", "sync"))  # offsets all 0
+    pslog_ok("import", "--rig", rig, "--detections", det, "-o", lab)
+    before = pslog_ok("info", lab)
+    assert "camera clocks off, or the rig's offsets not the cameras'; 'pslog sync" in before
+    pslog_ok("sync", lab, "-o", synced)
+    after = pslog_ok("info", synced)
+    assert "camera clocks off" not in after, after
+    assert ("measured on the times the rig's clock model corrects: the cameras fire there, "
+            "not where the rig's offsets plan") in after, after
+    assert f"'pslog rig show {synced} > rig.toml', edit the offsets" in after, after
