@@ -297,6 +297,16 @@ def parse_sources(rig, sources: list[str], offsets: list[str]) -> dict:
                 raise InputError(f"camera {name!r}: {path} is {kind}, not a video file" if kind
                                  else f"camera {name!r}: {why}" if why
                                  else f"camera {name!r}: video file not found: {path}")
+            from pslog.outputs import same_file
+
+            for other, given in specs.items():
+                # (walk42: a command line's source copied for the next camera, its name left:
+                # cam1's clip recorded as cam2's too, fused into nonsense without a word)
+                if isinstance(given, FileSpec) and same_file(given.path, path):
+                    spelled = "" if str(given.path) == str(path) else f" (as {given.path})"
+                    raise MalformedSource(f"camera {name!r} and camera {other!r} both read "
+                                          f"{path}{spelled}: each camera needs a video "
+                                          f"file of its own")
             specs[name] = FileSpec(path, cam.width, cam.height, offset)
     for name in offset_of:
         if not isinstance(specs.get(name), FileSpec):
