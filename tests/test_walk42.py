@@ -198,3 +198,38 @@ def test_info_of_a_synced_session_does_not_call_its_clocks_off(tmp_path):
     assert ("measured on the times the rig's clock model corrects: the cameras fire there, "
             "not where the rig's offsets plan") in after, after
     assert f"'pslog rig show {synced} > rig.toml', edit the offsets" in after, after
+
+
+# ---- sync: a readout estimated below zero is said ----------------------------------------------
+
+def test_sync_says_a_readout_estimated_below_zero(tmp_path):
+    """walk42: with the rig from `pslog calibrate` (centres 2-3 mm off) `pslog sync` put
+    cam1's readout at -0.700 ± 0.247 ms, 2.8σ below 0 (no sensor reads bottom to top), its
+    offsets 2.1-2.4σ off the truth, without a word. A readout estimated more than 2σ below 0
+    is now said, with the likely cause. Here cam1's times are moved as a readout of -15 ms
+    would move them (its stamps later the lower the row), the rest as simulated (paper3's
+    readouts are known to ~3 ms: the ball spans a tenth of its images' height)."""
+    import csv
+
+    sim, det, moved = tmp_path / "sim.mcap", tmp_path / "det.csv", tmp_path / "moved.csv"
+    pslog_ok("simulate", "--rig", "paper3", "--timing", "typeA", "--motion", "rally",
+             "--duration", "6", "--noise-px", "0.3", "--seed", "70045", "-o", sim)
+    pslog_ok("export", sim, "--detections", det)
+    with det.open() as f:
+        rows = list(csv.DictReader(f))
+    for row in rows:
+        if row["camera"] == "cam1" and row["v"]:
+            row["time"] = f"{float(row['time']) + 0.015 * float(row['v']) / 480:.9f}"
+    with moved.open("w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    lab = tmp_path / "lab.mcap"
+    pslog_ok("import", "--rig", "paper3", "--timing", "typeA", "--detections", moved, "-o", lab)
+    said = pslog_ok("sync", lab, "-o", tmp_path / "synced.mcap", "--estimate",
+                    "offset,readout", "--regularize", "off")  # (the moved stamps kept)
+    assert "note: readout estimated below 0 (cam1 -" in said, said
+    assert "which no camera reads" in said, said
+    plain = pslog_ok("sync", sim, "-o", tmp_path / "plain.mcap", "--estimate",
+                     "offset,readout")
+    assert "below 0" not in plain, plain
