@@ -233,3 +233,40 @@ def test_sync_says_a_readout_estimated_below_zero(tmp_path):
     plain = pslog_ok("sync", sim, "-o", tmp_path / "plain.mcap", "--estimate",
                      "offset,readout")
     assert "below 0" not in plain, plain
+
+
+# ---- record: shutters off the rig's offsets name pslog sync ------------------------------------
+
+def test_record_of_clips_off_the_rigs_offsets_names_sync(tmp_path):
+    """walk42: three webcams' clips started 11.1 and 28.9 ms apart (`@OFFSET`) on a rig
+    whose offsets are 0: `pslog record`'s note offered only to set the offsets and fuse
+    with them (fusion does not read them: it fuses the logged times), not `pslog sync`,
+    which took the walk's tracks from 10-15 mm to 1.4-3 mm. It names both now."""
+    clips = []
+    for i in range(2):
+        path = tmp_path / f"c{i}.avi"
+        writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 30.0, (640, 480))
+        for k in range(20):
+            image = np.full((480, 640, 3), (40, 110, 45), np.uint8)
+            cv2.circle(image, (150 + 12 * k, 240 - 3 * i), 8, (20, 110, 245), -1)
+            writer.write(image)
+        writer.release()
+        clips.append(path)
+    rig = tmp_path / "rig.toml"
+    rig.write_text(pslog_ok("rig", "show", "paper2", "--timing", "sync"))
+    out = tmp_path / "rec.mcap"
+    done = pslog_ok_err("record", "--rig", rig, "--source", f"cam1={clips[0]}", "--source",
+                        f"cam2={clips[1]}@0.0111", "-o", out)
+    note = next(line for line in done.splitlines() if "measured shutter offsets" in line)
+    assert "cam2 11.1 ms (rig 0.0 ms)" in note, note
+    assert f"'pslog sync {out} -o synced.mcap' estimates them from the ball" in note, note
+    assert f"'pslog fuse {out} --rig fixed.toml'" in note, note
+
+
+def pslog_ok_err(*args) -> str:
+    """The standard error of a pslog command that must succeed."""
+    from _cli import pslog
+
+    done = pslog(*args)
+    assert done.returncode == 0, done.stderr
+    return done.stderr
