@@ -240,8 +240,8 @@ def test_sync_says_a_readout_estimated_below_zero(tmp_path):
 def test_record_of_clips_off_the_rigs_offsets_names_sync(tmp_path):
     """walk42: three webcams' clips started 11.1 and 28.9 ms apart (`@OFFSET`) on a rig
     whose offsets are 0: `pslog record`'s note offered only to set the offsets and fuse
-    with them (fusion does not read them: it fuses the logged times), not `pslog sync`,
-    which took the walk's tracks from 10-15 mm to 1.4-3 mm. It names both now."""
+    with them (fusion runs on the logged times; only type A's gap rule reads them), not
+    `pslog sync`, which took the walk's tracks from 10-15 mm to 1.4-3 mm. It names both."""
     clips = []
     for i in range(2):
         path = tmp_path / f"c{i}.avi"

@@ -243,9 +243,9 @@ def _note_offsets(output, rig) -> None:
         listed = ", ".join(f"{name} {(measured % rig.camera(name).frame_period) * 1e3:.1f} ms "
                            f"(rig {nominal * 1e3:.1f} ms)" for name, measured, nominal in off)
         # (walk42: three webcams' clips, the rig's offsets 0: the note offered only to set
-        # the offsets, which fusion does not read (it fuses the logged times), and not the
-        # clocks' sync that took the tracks from 10-15 mm to 1.4-3 mm: import's and info's
-        # notes name it)
+        # the offsets, which fusion hardly reads (it fuses the logged times; type A's gap
+        # rule alone reads them), not the clocks' sync that took the tracks from 10-15 mm
+        # to 1.4-3 mm: import's and info's notes name it)
         out = shell_word(output)
         print(f"{PREFIX}note: measured shutter offsets differ from the rig's: {listed}; the "
               f"session keeps the rig's offsets (timing '{timing_label(rig)}') and the times "
