@@ -198,6 +198,15 @@ def test_info_of_a_synced_session_does_not_call_its_clocks_off(tmp_path):
     assert ("measured on the times the rig's clock model corrects: the cameras fire there, "
             "not where the rig's offsets plan") in after, after
     assert f"'pslog rig show {synced} > rig.toml', edit the offsets" in after, after
+    # the synced rig carried into a new session (its clocks another session's): said so,
+    # with the sync command
+    carried, again = tmp_path / "synced.toml", tmp_path / "again.mcap"
+    carried.write_text(pslog_ok("rig", "show", synced))
+    pslog_ok("import", "--rig", carried, "--detections", det, "-o", again)
+    said = pslog_ok("info", again)
+    assert ("a model not estimated on this session (given with its rig, e.g. an earlier "
+            "session's 'pslog sync'): the cameras' clocks may have moved since; 'pslog sync "
+            f"{again} -o synced.mcap' estimates them on this one") in said, said
 
 
 # ---- sync: a readout estimated below zero is said ----------------------------------------------
