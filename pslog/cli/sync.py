@@ -141,7 +141,8 @@ def _negative_readouts(result) -> list[str]:
     return [f"note: readout estimated below 0 ({said}), which no camera reads: the clocks "
             f"absorb an error of the model, most often the rig's geometry (its calibration); "
             f"their σ hold the pixel noise only (docs/timing.md, \"σ assumes the calibration "
-            f"exact\")"]
+            f"exact\"); the rig written holds 0, the nearest a camera reads, beside the "
+            f"offsets estimated with the negative one"]
 
 
 def _shared_readout_line(rig) -> str:
