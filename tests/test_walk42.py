@@ -207,6 +207,15 @@ def test_info_of_a_synced_session_does_not_call_its_clocks_off(tmp_path):
     assert ("a model not estimated on this session (given with its rig, e.g. an earlier "
             "session's 'pslog sync'): the cameras' clocks may have moved since; 'pslog sync "
             f"{again} -o synced.mcap' estimates them on this one") in said, said
+    # and `pslog fuse` of it says so too (it fused with the other session's clocks, unsaid)
+    fused = pslog_ok("fuse", again, "--method", "smooth", "-o", tmp_path / "again_f.mcap")
+    assert (f"note: {again}'s rig holds a clock model no 'pslog sync' estimated on it (cam2 "
+            "offset +") in fused, fused
+    assert f"'pslog sync {again} -o synced.mcap' estimates them on this one" in fused, fused
+    for quiet in (synced, lab):  # synced on itself, or no clock model: nothing said
+        said = pslog_ok("fuse", quiet, "--method", "smooth", "-o",
+                        tmp_path / f"{quiet.stem}_f.mcap")
+        assert "no 'pslog sync' estimated" not in said, said
 
 
 # ---- sync: a readout estimated below zero is said ----------------------------------------------
