@@ -327,10 +327,10 @@ def load_view_data(session_paths: str | Path | Sequence[str | Path], *,
                          f"after the first add their tracks; to view it as the session: "
                          f"'pslog view {shell_word(path)}')")
             continue
+        synced = (other.metadata or {}).get(CLOCK_STD_KEY) and not (
+            session.metadata or {}).get(CLOCK_STD_KEY)
         if not np.array_equal(other.detections.frame_time_ns, session.detections.frame_time_ns):
             mine, its = session.detections, other.detections
-            synced = (other.metadata or {}).get(CLOCK_STD_KEY) and not (
-                session.metadata or {}).get(CLOCK_STD_KEY)
             if synced and np.array_equal(*(
                     np.sort(d.frame_camera.astype(np.int64) << 40 | d.frame_index)
                     for d in (its, mine))):  # (times regularized: frames reordered)
@@ -343,6 +343,16 @@ def load_view_data(session_paths: str | Path | Sequence[str | Path], *,
             else:
                 notes.append(f"{path}: its frames are not {paths[0]}'s, so its tracks may "
                              f"come from another session")
+        elif synced:
+            # (walk42: the session beside its synced copy's fused file, as the README's
+            # "session, then fused copies of it" reads; the rays, epipolar lines and type A's
+            # Figure 2 constructions were drawn on the session's unsynced clocks, 907 of
+            # 2,804 typeA points explained, without a word)
+            notes.append(f"{path}: fused from a synced copy of {paths[0]} (clocks 'pslog "
+                         f"sync' estimated): its tracks are shown beside {paths[0]}'s logged "
+                         f"clocks (rays, epipolar lines and typeA's constructions on those); "
+                         f"'pslog view {shell_word(path)}' shows it with the clocks it was "
+                         f"fused with")
         for name, track in other.tracks.items():
             if name in tracks:
                 new = f"{name}_{_safe_name(path.stem)}"

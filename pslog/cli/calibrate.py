@@ -237,8 +237,9 @@ def _run_points(args, existing, rig_path: Path, fps: float, offset: float):
     worst = result.worst(min(_WORST_SHOWN, n))
     print("  worst points: " + ", ".join(
         f"#{i} (line {lines[i]}) {result.residuals_px[i]:.3f} px" for i in worst))
-    if np.any(~camera.in_image(uv)):
-        print(f"  note: {int(np.count_nonzero(~camera.in_image(uv)))} points lie outside the "
+    outside = int(np.count_nonzero(~camera.in_image(uv)))
+    if outside:
+        print(f"  note: {outside} point{'s lie' if outside > 1 else ' lies'} outside the "
               f"{width}x{height} image; check --width/--height")
     return camera, result.rms_px
 
@@ -298,3 +299,25 @@ def _print_intrinsics(camera) -> None:
     K, d = camera.K, camera.dist
     print(f"  K: fx {K[0, 0]:.2f}  fy {K[1, 1]:.2f}  cx {K[0, 2]:.2f}  cy {K[1, 2]:.2f} px")
     print(f"  dist: k1 {d[0]:.5f}  k2 {d[1]:.5f}  p1 {d[2]:.5f}  p2 {d[3]:.5f}  k3 {d[4]:.5f}")
+    share = _no_ray_share(camera)
+    if share > 0:
+        # (walk42: a chessboard seen near the image's centre only gave k3 -0.46, folding
+        # over in the corners; two detections there had no ray, and sync failed before
+        # session 42: said nowhere)
+        print(f"  note: the lens model folds over inside the image: {share:.1%} of it (towards "
+              f"the corners) has no ray, and detections there are left out; the distortion "
+              f"is not known there: calibrate with views reaching the image's corners")
+
+
+def _no_ray_share(camera, step_px: float = 4.0) -> float:
+    """The share of ``camera``'s image whose pixels have no ray (beyond its lens model's
+    fold-over), on a grid of ``step_px``."""
+    import numpy as np
+
+    if not np.any(camera.dist):
+        return 0.0
+    u = np.arange(0.0, camera.width, step_px)
+    v = np.arange(0.0, camera.height, step_px)
+    grid = np.stack(np.meshgrid(u, v), -1).reshape(-1, 2)
+    ok = np.all(np.isfinite(camera.undistort_normalized(grid)), axis=1)
+    return float(1 - np.count_nonzero(ok) / len(grid))

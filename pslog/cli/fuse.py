@@ -206,6 +206,7 @@ def run(args: argparse.Namespace) -> int:
     if args.clock_uncertainty != "off":
         _say_clock_uncertainty(args, session, options.clock_covariance,
                                read_clock_covariance(rig, rig_metadata) is not None)
+    _say_borrowed_clocks(args, session)
     observations = timed_observations(session.detections, rig)  # the rig's clock model
     if len(observations) == 0:
         raise FusionError(f"{args.session} has no detection to fuse")
@@ -570,6 +571,34 @@ def _say_clock_uncertainty(args: argparse.Namespace, session, applied,
     elif args.rig is not None and synced is not None:
         print(f"--rig {args.rig} replaces every clock parameter pslog sync estimated "
               f"({len(synced)}): {alone} (the rig's)")
+
+
+def _say_borrowed_clocks(args: argparse.Namespace, session) -> None:
+    """One line when the session's rig holds a clock model that no ``pslog sync`` estimated
+    on it (no ``clock_std`` metadata, no ``--rig``): the rig it was recorded or imported with
+    brought it, most likely an earlier session's synced rig (walk42: `pslog rig show
+    synced.mcap > lab.toml`, the next recording made with it, fused with the old session's
+    clocks without a word; webcams' offsets move at every start). Not for a synthetic
+    recording, whose rig's clocks are the ones it rendered."""
+    from pslog.errors import shell_word
+    from pslog.timing import CLOCK_STD_KEY
+
+    metadata = session.metadata or {}
+    cams = [c for c in session.rig.cameras if c.has_clock_correction]
+    if (args.rig is not None or not cams or metadata.get(CLOCK_STD_KEY)
+            or "--synthetic" in str(metadata.get("source", ""))):
+        return
+    said = ", ".join(
+        f"{c.name} " + " ".join(part for part in (
+            f"offset {c.clock_offset * 1e3:+.3f} ms" if c.clock_offset else "",
+            f"drift {c.clock_drift_ppm:+.1f} ppm" if c.clock_drift_ppm else "",
+            f"readout {c.readout * 1e3:.3f} ms" if c.readout else "") if part)
+        for c in cams)
+    path = shell_word(args.session)
+    print(f"note: {args.session}'s rig holds a clock model no 'pslog sync' estimated on it "
+          f"({said}): the rig it was recorded or imported with brought it, an earlier "
+          f"session's? Cameras without genlock move their clocks at every start: 'pslog sync "
+          f"{path} -o synced.mcap' estimates them on this one")
 
 
 def _say_other_frame_rates(name, rig, session) -> None:

@@ -140,10 +140,29 @@ def _text(info: dict) -> list[str]:
 
         said = ", ".join(f"{o['camera']} measured {o['measured_s'] * 1e3:.3f} ms, rig "
                          f"{o['rig_s'] * 1e3:.3f} ms" for o in off)
-        fix = ("" if info["clock_corrected"] else
-               f"; 'pslog sync {shell_word(info['path'])} -o synced.mcap' estimates the clocks")
-        lines.append(f"  shutters off the rig's offsets ({said}): camera clocks off, or the "
-                     f"rig's offsets not the cameras'{fix}")
+        path = shell_word(info["path"])
+        if info["clock_corrected"] and not info.get("clock_synced", True):
+            # (walk42: a new recording with the rig 'pslog rig show synced.mcap' wrote, its
+            # clocks an earlier session's: webcams' offsets move at every start)
+            lines.append(f"  shutters off the rig's offsets ({said}), measured on the times "
+                         f"the rig's clock model corrects, a model not estimated on this "
+                         f"session (given with its rig, e.g. an earlier session's 'pslog "
+                         f"sync'): the cameras' clocks may have moved since; 'pslog sync "
+                         f"{path} -o synced.mcap' estimates them on this one")
+        elif info["clock_corrected"]:
+            # (walk42: a synced session of webcams whose rig planned no phases, offsets 0,
+            # was told "camera clocks off" though its clock model corrects them: the phases
+            # measured are on the corrected times, where the cameras really fire)
+            lines.append(f"  shutters off the rig's offsets ({said}), measured on the times "
+                         f"the rig's clock model corrects: the cameras fire there, not where "
+                         f"the rig's offsets plan (fusion runs on the corrected times; the "
+                         f"offsets name the timing, hence the default methods; to set them: "
+                         f"'pslog rig show {path} > rig.toml', edit the offsets, 'pslog fuse "
+                         f"{path} --rig rig.toml')")
+        else:
+            lines.append(f"  shutters off the rig's offsets ({said}): camera clocks off, or the "
+                         f"rig's offsets not the cameras'; 'pslog sync {path} -o synced.mcap' "
+                         f"estimates the clocks")
     if info["clock_corrected"]:
         lines.append("  clock model (true = logged + offset + drift * logged + readout * v / "
                      "height; applied when fusing):")

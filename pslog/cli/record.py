@@ -242,11 +242,17 @@ def _note_offsets(output, rig) -> None:
         # phase may come as -13.6 ms, which the rig refuses, for the 19.7 ms to set
         listed = ", ".join(f"{name} {(measured % rig.camera(name).frame_period) * 1e3:.1f} ms "
                            f"(rig {nominal * 1e3:.1f} ms)" for name, measured, nominal in off)
+        # (walk42: three webcams' clips, the rig's offsets 0: the note offered only to set
+        # the offsets, which fusion hardly reads (it fuses the logged times; type A's gap
+        # rule alone reads them), not the clocks' sync that took the tracks from 10-15 mm
+        # to 1.4-3 mm: import's and info's notes name it)
+        out = shell_word(output)
         print(f"{PREFIX}note: measured shutter offsets differ from the rig's: {listed}; the "
-              f"session keeps the rig's offsets (timing '{timing_label(rig)}'); to fuse with the "
-              f"measured ones, 'pslog rig show {shell_word(output)} > fixed.toml', set the "
-              f"offsets and 'pslog fuse {shell_word(output)} --rig fixed.toml'",
-              file=sys.stderr)
+              f"session keeps the rig's offsets (timing '{timing_label(rig)}') and the times "
+              f"as logged: cameras without genlock have clocks of their own, 'pslog sync "
+              f"{out} -o synced.mcap' estimates them from the ball (then fuse that); if the "
+              f"rig's offsets are wrong instead, 'pslog rig show {out} > fixed.toml', set the "
+              f"offsets and 'pslog fuse {out} --rig fixed.toml'", file=sys.stderr)
 
 
 #: largest device index a --source takes: OpenCV's VideoCapture takes a C int (a larger one
@@ -297,6 +303,16 @@ def parse_sources(rig, sources: list[str], offsets: list[str]) -> dict:
                 raise InputError(f"camera {name!r}: {path} is {kind}, not a video file" if kind
                                  else f"camera {name!r}: {why}" if why
                                  else f"camera {name!r}: video file not found: {path}")
+            from pslog.outputs import same_file
+
+            for other, given in specs.items():
+                # (walk42: a command line's source copied for the next camera, its name left:
+                # cam1's clip recorded as cam2's too, fused into nonsense without a word)
+                if isinstance(given, FileSpec) and same_file(given.path, path):
+                    spelled = "" if str(given.path) == str(path) else f" (as {given.path})"
+                    raise MalformedSource(f"camera {name!r} and camera {other!r} both read "
+                                          f"{path}{spelled}: each camera needs a video "
+                                          f"file of its own")
             specs[name] = FileSpec(path, cam.width, cam.height, offset)
     for name in offset_of:
         if not isinstance(specs.get(name), FileSpec):

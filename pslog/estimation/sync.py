@@ -293,6 +293,7 @@ def _estimate_clocks(obs: Observations, rig: Rig, estimate, search_s: float | No
                           f"rig has {len(rig)}")
     unknowns = [(c, p) for c in range(len(rig)) for p in estimate
                 if not (c == 0 and p in ("offset", "drift"))]
+    obs = _with_rays(obs, rig)
     _check_coverage(obs, rig, options.max_gap_s)
     span = float(obs.time_ns.max() - obs.time_ns.min()) / NS
     if search_s is not None and "offset" in estimate and not search_s < span:
@@ -945,6 +946,23 @@ def _banded_matvec(ab: np.ndarray, x: np.ndarray) -> np.ndarray:
         out[:-d] += ab[-1 - d, d:] * x[d:]
         out[d:] += ab[-1 - d, d:] * x[:-d]
     return out
+
+
+def _with_rays(obs: Observations, rig: Rig) -> Observations:
+    """``obs`` without the detections whose pixel has no ray (beyond the lens model's
+    fold-over: NaN undistorted), as every fusion method takes them: missing ones (walk42: a
+    webcam whose chessboard calibration's k3 folds over inside its image's corner; the scan's
+    two-camera fits took the NaN rays, every trial cost was undefined, and sync said no
+    stretch was "seen by it and camera cam1 together long enough to scan its offset")."""
+    keep = np.ones(len(obs), dtype=bool)
+    for c, cam in enumerate(rig.cameras):
+        rows = np.flatnonzero(obs.camera == c)
+        if len(rows) and np.any(cam.dist):
+            uv = obs.uv[rows]
+            ok = np.all(np.isfinite(uv), axis=1)
+            ok[ok] = np.all(np.isfinite(cam.undistort_normalized(uv[ok])), axis=1)
+            keep[rows] = ok
+    return obs if keep.all() else obs.select(np.flatnonzero(keep))
 
 
 def _scan_offsets(obs, rig, unknowns, theta, params, search_s, options) -> np.ndarray:

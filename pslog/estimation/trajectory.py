@@ -924,6 +924,13 @@ def _fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions,
     for i, cam in enumerate(rig.cameras):  # a pixel far off the image is no detection
         sel = obs.camera == i
         usable[sel] &= np.all(np.abs(obs.uv[sel]) <= 10 * max(cam.width, cam.height), axis=1)
+        # nor is one beyond the lens model's fold-over, which has no ray (walk42: a webcam's
+        # calibrated k3 folded over in the image's corner; its NaN made the DLT start's
+        # normal matrix "not positive definite", and `smooth --gating off` and `pslog sync`
+        # failed: docs/methods.md, "A detection without a ray")
+        rows = np.flatnonzero(sel & usable)
+        if len(rows) and np.any(cam.dist):
+            usable[rows] = np.all(np.isfinite(cam.undistort_normalized(obs.uv[rows])), axis=1)
     pieces = split_pieces(obs, usable, options.max_gap_s)
     if not pieces:
         # no command's name here: smooth (fusion) and sync (clocks) each say whose fit it is

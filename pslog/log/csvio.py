@@ -369,6 +369,10 @@ def read_detections_csv(path, rig: Rig, camera: str | None = None,
                    if len(set(header)) != len(header) else "")
                 + ("; one camera's file: name its camera, --detections CAMERA=FILE"
                    if missing == ["camera"] and not unknown else "")
+                # (walk42: a detector's own header refused without a word of --columns)
+                + (f"; a detector's own column names are read as pslog's with --columns "
+                   f"{','.join(f'{m}=COLUMN' for m in missing)}"
+                   if missing and unknown and len(header) > 1 else "")
                 + ("; its fields are separated by ';': separate them by commas (or tabs), "
                    "with decimal points" if len(header) == 1 and ";" in header[0] else ""))
         col = {name: header.index(name) for name in header}

@@ -396,6 +396,7 @@ def session_info(path) -> dict:
         row["clock_drift_ppm"] = cam.clock_drift_ppm
         row["readout_s"] = cam.readout
     meta = session.metadata
+    from ..timing import CLOCK_STD_KEY
     from .csvio import session_clock_origin
     return {
         "path": str(path),
@@ -409,6 +410,9 @@ def session_info(path) -> dict:
         "cameras": cameras,
         "offset_reference": rig.names[0],
         "clock_corrected": any(cam.has_clock_correction for cam in rig.cameras),
+        # (the clock model estimated on this session by 'pslog sync', not one given with the
+        # rig: an earlier session's, carried into a new recording; walk42)
+        "clock_synced": bool(meta.get(CLOCK_STD_KEY)),
         "clock_origin_ns": session_clock_origin(meta, path),
         "topics": counts,
         "frames": det.n_frames,

@@ -182,8 +182,10 @@ def test_a_source_file_that_is_no_video_is_said_in_pslogs_words_alone(tmp_path):
     import random
 
     (tmp_path / "noise.mp4").write_bytes(random.Random(2).randbytes(3000))
+    # (a file each: one file for two cameras is refused since session 42's walk)
+    (tmp_path / "noise2.mp4").write_bytes((tmp_path / "noise.mp4").read_bytes())
     run = run_pslog("record", "--rig", "paper2", "--source", "cam1=noise.mp4", "--source",
-                    "cam2=noise.mp4", "-o", "rec.mcap", cwd=tmp_path, timeout=60)
+                    "cam2=noise2.mp4", "-o", "rec.mcap", cwd=tmp_path, timeout=60)
     assert run.code == 1, run.stderr
     assert "not a video OpenCV can read" in run.stderr
     assert "moov atom" not in run.stderr and " @ 0x" not in run.stderr, run.stderr
