@@ -127,22 +127,24 @@ NEGATIVE_READOUT_SIGMAS = 2.0
 
 
 def _negative_readouts(result) -> list[str]:
-    """A note for the readouts estimated clearly below 0 (no sensor reads its rows bottom to
-    top): walk42's calibrated rig (centres 2-3 mm, focal lengths 0.2 % off) put cam1's at
-    -0.700 +- 0.247 ms, its offsets 2.1-2.4σ off the truth with it, without a word; with the
-    true geometry -0.021 +- 0.149 (docs/timing.md, "σ assumes the calibration exact")."""
-    below = [c for c in result.cameras
-             if "readout" in result.estimated and c.readout_std_s > 0
-             and c.readout_s < -NEGATIVE_READOUT_SIGMAS * c.readout_std_s]
+    """A note for the readouts the free fit put clearly below 0 (no sensor reads its rows
+    bottom to top), which sync then held at 0, the clocks fitted again
+    (``SyncResult.held_readouts``): walk42's calibrated rig (centres 2-3 mm, focal lengths
+    0.2 % off) put cam1's at -0.700 +- 0.247 ms, its offsets 2.1-2.4σ off the truth with it,
+    without a word; with the true geometry -0.021 +- 0.149 (docs/timing.md, "σ assumes the
+    calibration exact"). A readout just below 0 (within the noise: a global shutter) is held
+    at 0 without a word."""
+    below = [(name, value, std) for name, value, std in result.held_readouts
+             if std > 0 and value < -NEGATIVE_READOUT_SIGMAS * std]
     if not below:
         return []
-    said = ", ".join(f"{c.name} {c.readout_s * 1e3:.3f} ± {c.readout_std_s * 1e3:.3f} ms "
-                     f"({-c.readout_s / c.readout_std_s:.1f}σ)" for c in below)
+    said = ", ".join(f"{name} {value * 1e3:.3f} ± {std * 1e3:.3f} ms ({-value / std:.1f}σ)"
+                     for name, value, std in below)
     return [f"note: readout estimated below 0 ({said}), which no camera reads: the clocks "
             f"absorb an error of the model, most often the rig's geometry (its calibration); "
             f"their σ hold the pixel noise only (docs/timing.md, \"σ assumes the calibration "
-            f"exact\"); the rig written holds 0, the nearest a camera reads, beside the "
-            f"offsets estimated with the negative one"]
+            f"exact\"); held at 0, the nearest a camera reads, and the clocks fitted again "
+            f"with it"]
 
 
 def _shared_readout_line(rig) -> str:

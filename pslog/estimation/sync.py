@@ -214,7 +214,9 @@ class SyncResult:
     ``unknowns`` (camera, parameter) per row of ``covariance`` (rig's parametrisation);
     ``shared_readout``: one readout estimated per camera model (:data:`SHARED_READOUT`),
     each camera holding its model's value and ``covariance`` its rows (identical within a
-    model: singular, positive semi-definite)."""
+    model: singular, positive semi-definite); ``held_readouts`` (camera name, readout s, its
+    std s) the readouts the free fit put below 0, then held at 0 with the clocks fitted
+    again (:func:`_readouts_held`: the rig and ``cameras`` hold that fit)."""
 
     cameras: tuple[ClockEstimate, ...]
     rig: Rig
@@ -225,6 +227,7 @@ class SyncResult:
     unknowns: tuple[tuple[int, str], ...] = ()
     covariance: np.ndarray | None = None
     shared_readout: bool = False
+    held_readouts: tuple[tuple[str, float, float], ...] = ()
 
     def clock_covariance(self) -> ClockCovariance | None:
         """The estimates' joint covariance as :class:`pslog.timing.ClockCovariance` (what
@@ -269,10 +272,20 @@ def estimate_clocks(obs: Observations, rig: Rig, estimate=("offset",),
     InputError : ``search_s`` neither None nor seconds in [1 ns, 60 s]
     """
     search_s = check_search_s(search_s)
+    return _readouts_held(_estimate_free(obs, rig, estimate, search_s, options, regularized,
+                                         start), obs, rig, search_s, options, regularized)
+
+
+def _estimate_free(obs: Observations, rig: Rig, estimate, search_s: float | None,
+                   options: SmoothOptions | None, regularized,
+                   start: Rig | None = None, held: tuple[int, ...] = ()) -> SyncResult:
+    """:func:`estimate_clocks` without the readouts' bound (``held``: cameras whose readout
+    is held at ``rig``'s, not estimated)."""
     if tuple([estimate] if isinstance(estimate, str) else estimate) == ("auto",):
         return select_clocks(obs, rig, search_s, options, regularized)
     try:
-        return _estimate_clocks(obs, rig, estimate, search_s, options, regularized, start)
+        return _estimate_clocks(obs, rig, estimate, search_s, options, regularized, start,
+                                held)
     except np.linalg.LinAlgError:
         # a singular system: some clock has no information left (its detections all
         # rejected as outliers, or a motion that cannot tell it apart)
@@ -281,9 +294,42 @@ def estimate_clocks(obs: Observations, rig: Rig, estimate=("offset",),
                           ) from None
 
 
+def _readouts_held(result: SyncResult, obs: Observations, rig: Rig, search_s: float | None,
+                   options: SmoothOptions | None, regularized) -> SyncResult:
+    """``result`` where no readout was estimated below 0; else the clocks fitted again with
+    those readouts held at 0 (their bound: no sensor reads its rows bottom to top), from
+    ``result``'s clocks (no coarse scan), the model otherwise the same, ``selection`` kept
+    and the free fit's values in ``held_readouts``. The maximum likelihood under the bound
+    (its solution on the boundary, where the free one lies beyond it; a readout held may
+    push another below 0, which is then held too): before session 42 the
+    rig written held 0 beside offsets fitted with the negative readout (walk42: cam1 at
+    -0.700 ± 0.247 ms from a calibrated rig, its times up to 0.7 ms off the written model)."""
+    held: dict[int, tuple[str, float, float]] = {}
+    fit = result
+    while True:  # (a readout held may push another below 0: held in turn, at most all)
+        below = [c for c, est in enumerate(fit.cameras)
+                 if (c, "readout") in fit.unknowns and est.readout_s < 0]
+        if not below:
+            break
+        for c in below:
+            held[c] = (fit.cameras[c].name, fit.cameras[c].readout_s,
+                       fit.cameras[c].readout_std_s)
+        zero = Rig(tuple(cam.replace(readout=0.0) if c in held else cam
+                         for c, cam in enumerate(rig.cameras)), rig.name)
+        left = any(p == "readout" and c not in held for c, p in fit.unknowns)
+        estimate = tuple(SHARED_READOUT if p == "readout" and result.shared_readout and left
+                         else p for p in result.estimated)
+        fit = _estimate_free(obs, zero, estimate, search_s, options, regularized,
+                             start=fit.rig, held=tuple(sorted(held)))
+    if fit is result:
+        return result
+    return replace(fit, selection=result.selection, estimated=result.estimated,
+                   held_readouts=tuple(held[c] for c in sorted(held)))
+
+
 def _estimate_clocks(obs: Observations, rig: Rig, estimate, search_s: float | None,
                      options: SmoothOptions | None, regularized,
-                     start: Rig | None = None) -> SyncResult:
+                     start: Rig | None = None, held: tuple[int, ...] = ()) -> SyncResult:
     options = options or SmoothOptions()
     shared = SHARED_READOUT in set(estimate)
     estimate = tuple(p for p in PARAMETERS
@@ -292,7 +338,8 @@ def _estimate_clocks(obs: Observations, rig: Rig, estimate, search_s: float | No
         raise FusionError(f"sync needs at least two cameras (one camera cannot triangulate); "
                           f"rig has {len(rig)}")
     unknowns = [(c, p) for c in range(len(rig)) for p in estimate
-                if not (c == 0 and p in ("offset", "drift"))]
+                if not (c == 0 and p in ("offset", "drift"))
+                and not (p == "readout" and c in held)]
     obs = _with_rays(obs, rig)
     _check_coverage(obs, rig, options.max_gap_s)
     span = float(obs.time_ns.max() - obs.time_ns.min()) / NS
@@ -427,7 +474,7 @@ def select_clocks(obs: Observations, rig: Rig, search_s: float | None = None,
     failure: dict[str, str] = {}  # parameter -> the message of the last wide fit that failed
     for wide in widest:  # with drifts a long session's wide fit may fail: then without
         try:
-            full = estimate_clocks(obs, rig, wide, search_s, options, regularized)
+            full = _estimate_free(obs, rig, wide, search_s, options, regularized)
             break
         except FusionError as exc:
             failure.update((p, str(exc)) for p in wide if p != "offset")
@@ -524,9 +571,9 @@ def select_clocks(obs: Observations, rig: Rig, search_s: float | None = None,
         # (a full-frame rolling shutter, 32 ms at 30 fps) or below 0 made the start a rig
         # refused, and auto failed (RigError, session 38's review)
         start = None if full is None or not tied else full.rig
-        result = estimate_clocks(obs, rig, tuple(SHARED_READOUT if tied and p == "readout"
-                                                 else p for p in chosen),
-                                 search_s, options, regularized, start)
+        result = _estimate_free(obs, rig, tuple(SHARED_READOUT if tied and p == "readout"
+                                                else p for p in chosen),
+                                search_s, options, regularized, start)
     return replace(result, selection=tuple(tests))
 
 
