@@ -126,11 +126,7 @@ class Rig:
     @classmethod
     def from_toml(cls, text: str, source: str = "rig") -> Rig:
         """Parse and validate rig TOML; errors name ``source``, the camera and the key."""
-        try:
-            data = tomllib.loads(text)
-        except tomllib.TOMLDecodeError as exc:
-            raise RigError(f"{source}: malformed TOML: {exc}") from None
-        return cls.from_dict(data, source)
+        return cls.from_dict(parse_toml(text, source), source)
 
     @classmethod
     def from_dict(cls, data: dict, source: str = "rig") -> Rig:
@@ -163,6 +159,23 @@ class Rig:
             return cls(tuple(cameras), name)
         except RigError as exc:
             raise RigError(f"{source}: {exc}") from None
+
+
+def parse_toml(text: str, source: str) -> dict:
+    """``tomllib.loads(text)``; :class:`RigError` naming ``source`` if malformed, nested too
+    deeply for Python's stack (``K = [[[[...]]]]`` a few hundred deep: tomllib parses arrays
+    recursively, and its RecursionError was a traceback) or holding an integer beyond Python's
+    4300 digits (its ValueError, likewise)."""
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise RigError(f"{source}: malformed TOML: {exc}") from None
+    except RecursionError:
+        raise RigError(f"{source}: malformed TOML: arrays or tables nested too deeply (a "
+                       f"rig's deepest is a matrix, two levels)") from None
+    except ValueError as exc:  # (not a TOMLDecodeError: an integer of over 4300 digits)
+        raise RigError(f"{source}: malformed TOML: a number of more digits than any rig's "
+                       f"({str(exc).partition(';')[0]})") from None
 
 
 def load_rig(path: str | Path, fmt: str = "auto", options=None) -> Rig:

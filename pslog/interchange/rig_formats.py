@@ -41,16 +41,15 @@ from __future__ import annotations
 
 import math
 import re
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from ..camera import Camera
+from ..camera import Camera, holds_non_number
 from ..errors import RigError, shell_word
-from ..rig import Rig
+from ..rig import Rig, parse_toml
 
 #: formats a rig file may be in (``pslog`` is pslog's own TOML, pslog/rig.py)
 FORMATS = ("pslog", "anipose", "pose2sim", "opencv")
@@ -127,12 +126,12 @@ def detect_format(text: str, path: str | Path) -> tuple[str, dict[str, Any] | No
     if Path(path).suffix.lower() in OPENCV_SUFFIXES:
         return "opencv", None
     try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
+        data = parse_toml(text, source)
+    except RigError:
         head = text.lstrip()[:16]
         if head.startswith(("%YAML", "<?xml", "<opencv_storage")):
             return "opencv", None
-        raise RigError(f"{source}: malformed TOML: {exc}") from None
+        raise
     if "camera" in data or set(data) <= {"name"}:
         return "pslog", data  # pslog's own checks say what is wrong with it
     tables = _camera_tables(data)
@@ -195,10 +194,7 @@ def parse_rig_text(text: str, path: str | Path, fmt: str = "auto",
         return RigFile(_with_timing(rig, options, source), "pslog", "m", True)
     if detected in ("anipose", "pose2sim"):
         if data is None:
-            try:
-                data = tomllib.loads(text)
-            except tomllib.TOMLDecodeError as exc:
-                raise RigError(f"{source}: malformed TOML: {exc}") from None
+            data = parse_toml(text, source)
         # every table but the ones the two tools keep beside their cameras is a camera: a
         # camera table without a matrix is an error, not a camera silently left out
         tables = [(k, v) for k, v in data.items()
@@ -307,11 +303,13 @@ def _array(value, shapes: tuple[tuple[int, ...], ...], key: str, where: str) -> 
     """``value`` as a finite float64 array of one of ``shapes``; RigError naming ``key``."""
     try:
         array = np.array(value, dtype=np.float64)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):  # (an integer beyond any float: 10**400)
         raise RigError(f"{where}: {key} is not numeric: {_short(value)}") from None
     if array.shape not in shapes:
         want = " or ".join(str(s) for s in shapes)
         raise RigError(f"{where}: {key} must have shape {want}, got {array.shape}")
+    if holds_non_number(value):  # ("400" or true, which numpy reads as 400 or 1)
+        raise RigError(f"{where}: {key} is not numeric: {_short(value)}")
     if not np.all(np.isfinite(array)):
         raise RigError(f"{where}: {key} has non-finite values")
     return array
@@ -451,6 +449,19 @@ def _opencv_node(node, keys: tuple[str, ...], where: str, required: bool = True)
     return None, None
 
 
+def _node_numbers(seq, key: str, where: str) -> list[float]:
+    """The numbers of a FileStorage sequence node; RigError naming ``key`` for an item that
+    is not one (``real()`` of a string is 1.8e308: "K has an entry of 1.8e+308 pixels")."""
+    values = []
+    for i in range(seq.size()):
+        item = seq.at(i)
+        if not (item.isReal() or item.isInt()):
+            shown = repr(item.string()) if item.isString() else "not a number"
+            raise RigError(f"{where}: {key} is not numeric: item {i + 1} is {shown}")
+        values.append(item.real())
+    return values
+
+
 def _opencv_matrix(node, key: str, where: str) -> np.ndarray:
     """A matrix node: ``!!opencv-matrix`` (``rows``, ``cols``, ``dt``, ``data``), a ROS
     ``camera_info`` map (``rows``, ``cols``, ``data``), or a plain sequence of numbers."""
@@ -460,14 +471,14 @@ def _opencv_matrix(node, key: str, where: str) -> np.ndarray:
         rows, cols, data = (node.getNode(k) for k in ("rows", "cols", "data"))
         if rows.empty() or cols.empty() or not data.isSeq():
             raise RigError(f"{where}: {key} is a map without rows, cols and data")
-        values = [data.at(i).real() for i in range(data.size())]
+        values = _node_numbers(data, key, where)
         shape = (int(rows.real()), int(cols.real()))
         if shape[0] * shape[1] != len(values):
             raise RigError(f"{where}: {key} has {len(values)} values for {shape[0]} x "
                            f"{shape[1]}")
         return np.array(values, dtype=np.float64).reshape(shape)
     if node.isSeq():
-        return np.array([node.at(i).real() for i in range(node.size())], dtype=np.float64)
+        return np.array(_node_numbers(node, key, where), dtype=np.float64)
     try:
         value = node.mat()
     except cv2.error:

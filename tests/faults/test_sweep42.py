@@ -1,0 +1,185 @@
+"""Session 42's hostile-input sweep (helper hostile42), through the real CLI on real files:
+rig files and calibration interchange (pslog, anipose, Pose2Sim, OpenCV) in ``rig
+check|show|import|export``, ``fuse --rig`` and ``simulate --rig``; ``pslog calibrate``'s
+point files, chessboard options and image folders; ``eval --truth`` files; numeric option
+values everywhere (the probes: benchmarks/session42/hostile/).
+
+Found and fixed: a rig TOML nested a few hundred arrays deep (``K = [[[[...]]]]``), or holding
+an integer of more than 4300 digits, was a traceback (tomllib's RecursionError, Python's
+ValueError); an integer beyond int64 (``fps = 1180591620717411303424``, TOML allows it) was
+numpy's TypeError traceback, an integer beyond any float (``size = [1e400 as digits, 480]``)
+an OverflowError one; a matrix holding a string or a boolean (``K = [["400", ...]]``,
+``distortions = [false, ...]``) was read as the number numpy makes of it (400, 0), silently;
+a camera named with U+2028 (a line separator: ``str.splitlines`` breaks there) was accepted
+and cut ``fuse --rig``'s error in two lines; ``calibrate --points`` of 30,000 points asked
+for a 29 GiB matrix (the DLT's full SVD: "out of memory", exit 1), now 3 s."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from .promises import assert_refused, run_pslog
+
+_PAPER3 = None
+
+
+def _paper3_toml() -> str:
+    global _PAPER3
+    if _PAPER3 is None:
+        done = run_pslog("rig", "show", "paper3")
+        assert done.code == 0, done.stderr
+        _PAPER3 = done.stdout
+    return _PAPER3
+
+
+def _anipose_toml(tmp_path: Path, fmt: str = "anipose") -> str:
+    out = tmp_path / f"exported_{fmt}.toml"
+    done = run_pslog("rig", "export", "paper3", "--format", fmt, "-o", out)
+    assert done.code == 0, done.stderr
+    text = out.read_text()
+    out.unlink()
+    return text
+
+
+_K = "K = [[400.0, 0.0, 319.5], [0.0, 400.0, 239.5], [0.0, 0.0, 1.0]]"
+
+
+@pytest.mark.parametrize("how", ["check", "import --format anipose"])
+def test_a_rig_nested_too_deeply_is_one_line(tmp_path, how):
+    """``K`` nested 2000 arrays deep: tomllib parses arrays recursively, and its
+    RecursionError was a traceback (also read by ``rig import --format anipose``)."""
+    text = _paper3_toml()
+    assert _K in text
+    (tmp_path / "deep.toml").write_text(text.replace(_K, "K = " + "[" * 2000 + "]" * 2000, 1))
+    args = (["rig", "check", "deep.toml"] if how == "check" else
+            ["rig", "import", "deep.toml", "--format", "anipose", "-o", "out.toml"])
+    assert_refused(tmp_path, 1, args, contains=("deep.toml: malformed TOML", "nested too deeply"))
+
+
+_NUMBERS = {"2**70": str(2 ** 70), "10**400": "1" + "0" * 400, "5001-digits": "1" + "0" * 5000}
+
+
+@pytest.mark.parametrize("case", ["pslog fps 2**70", "pslog offset 2**70", "anipose fps 2**70",
+                                  "anipose size 10**400", "pslog K 10**400",
+                                  "pslog fps 5001-digits"])
+def test_an_integer_beyond_int64_is_said(tmp_path, case):
+    """TOML integers are unbounded in tomllib: ``fps = 1180591620717411303424`` was numpy's
+    "ufunc 'isfinite' not supported" traceback; 10**400 as digits in a matrix or a size an
+    OverflowError one; 5001 digits Python's "Exceeds the limit (4300 digits)" ValueError."""
+    fmt, key, value = case.split()
+    number = _NUMBERS[value]
+    if fmt == "pslog":
+        text = _paper3_toml()
+        old = {"fps": "fps = 30.0", "offset": "offset = 0.0", "K": "K = [[400.0,"}[key]
+        new = {"fps": f"fps = {number}", "offset": f"offset = {number}",
+               "K": f"K = [[{number},"}[key]
+    else:
+        text = _anipose_toml(tmp_path)
+        old, new = {"fps": ("fps = 30.0", f"fps = {number}"),
+                    "size": ("size = [640, 480]", f"size = [{number}, 480]")}[key]
+    assert old in text
+    (tmp_path / "rig.toml").write_text(text.replace(old, new, 1))
+    says = {"fps": "fps must be in [0.1, 1e+06], got 1.18059e+21",
+            "offset": "offset 1.18059e+21 s must be in", "size": "size is not numeric",
+            "K": "K is not numeric"}[key]
+    if value == "5001-digits":
+        says = "a number of more digits than any rig's"
+    assert_refused(tmp_path, 1, ["rig", "check", "rig.toml"], contains=says)
+
+
+@pytest.mark.parametrize("case", ["pslog K string", "pslog K boolean",
+                                  "anipose matrix string", "pose2sim distortions boolean"])
+def test_a_string_or_a_boolean_is_not_a_number(tmp_path, case):
+    """``K = [["400", ...]]`` or ``[[400.0, false, ...]]``: numpy's float conversion read the
+    string as 400 and the boolean as 0, and the rig was accepted (and simulated with)."""
+    fmt, key, kind = case.split()
+    if fmt == "pslog":
+        text = _paper3_toml()
+        old = "K = [[400.0, 0.0,"
+        new = 'K = [["400", 0.0,' if kind == "string" else "K = [[400.0, false,"
+    else:
+        text = _anipose_toml(tmp_path, fmt)
+        old, new = {"matrix": ("matrix = [[400.0,", 'matrix = [["400",'),
+                    "distortions": ("distortions = [0.0,", "distortions = [false,")}[key]
+    assert old in text
+    (tmp_path / "rig.toml").write_text(text.replace(old, new, 1))
+    for args in (["rig", "check", "rig.toml"],
+                 ["simulate", "--rig", "rig.toml", "--duration", "0.5", "--seed", "71000",
+                  "-o", "s.mcap"]):
+        assert_refused(tmp_path, 1, args, contains=f"{key} is not numeric")
+
+
+@pytest.mark.parametrize("where", ["rig check", "fuse --rig", "calibrate --name"])
+def test_a_line_separator_in_a_camera_name_is_refused(tmp_path, where):
+    """U+2028 (LINE SEPARATOR) is a line break to ``str.splitlines`` (and to some terminals
+    and editors): a camera so named was accepted, and ``fuse --rig``'s "cameras ... differ
+    from the session's" error came out on two lines."""
+    name = "cam\u20281"
+    text = _paper3_toml().replace('name = "cam1"', f'name = "{name}"', 1)
+    (tmp_path / "rig.toml").write_text(text)
+    if where == "rig check":
+        assert_refused(tmp_path, 1, ["rig", "check", "rig.toml"],
+                       contains="holds a control character or line break")
+    elif where == "fuse --rig":
+        done = run_pslog("simulate", "--rig", "paper3", "--timing", "typeA", "--duration", "0.5",
+                         "--seed", "71000", "-o", tmp_path / "s.mcap")
+        assert done.code == 0, done.stderr
+        assert_refused(tmp_path, 1, ["fuse", "s.mcap", "--rig", "rig.toml", "-o", "f.mcap"],
+                       contains="holds a control character or line break")
+    else:
+        points = Path(__file__).resolve().parents[2] / "samples" / "cam1_points.csv"
+        (tmp_path / "points.csv").write_bytes(points.read_bytes())
+        assert_refused(tmp_path, 2, ["calibrate", "--points", "points.csv", "--name", name,
+                                     "--width", "640", "--height", "480", "--rig", "new.toml"],
+                       contains="holds a control character or line break")
+
+
+def test_calibrate_takes_a_large_survey(tmp_path):
+    """40,000 points (a dense survey, or a tracker's log of a wand): the DLT's SVD computed
+    its full 2n x 2n U, 51 GB, and ``calibrate`` said "out of memory" (exit 1); it needs only
+    the 12 x 12 V. Now a few seconds, and the camera is the samples' 16 points' own."""
+    lines = (Path(__file__).resolve().parents[2] / "samples" / "cam1_points.csv").read_text(
+    ).splitlines()
+    repeats = -(-40_000 // (len(lines) - 1))
+    (tmp_path / "points.csv").write_text("\n".join([lines[0]] + lines[1:] * repeats) + "\n")
+    done = run_pslog("calibrate", "--points", "points.csv", "--name", "cam1", "--width", "640",
+                     "--height", "480", "--rig", "rig.toml", cwd=tmp_path)
+    assert done.code == 0, done.stderr
+    assert "out of memory" not in done.stderr
+    assert f"calibrated from {repeats * (len(lines) - 1)} points" in done.stdout
+    shown = run_pslog("rig", "check", "rig.toml", cwd=tmp_path)
+    assert shown.code == 0 and "cam1" in shown.stdout, shown.stderr
+
+
+_ROS_YML = """%YAML:1.0
+---
+image_width: 640
+image_height: 480
+camera_name: cam1
+camera_matrix:
+  rows: 3
+  cols: 3
+  data: [{fx}, 0, 319.5, 0, 400, 239.5, 0, 0, 1]
+distortion_coefficients:
+  rows: 1
+  cols: 5
+  data: [0, 0, 0, 0, 0]
+rvec: [3.14159, 0, 0]
+T: [0, 0, {tz}]
+"""
+
+
+@pytest.mark.parametrize("fx, tz, says", [("abc", "3", "camera_matrix is not numeric: item 1 "
+                                                        "is 'abc'"),
+                                          ("400", '"3"', "T is not numeric: item 3 is '3'")])
+def test_an_opencv_sequence_holding_a_string_names_it(tmp_path, fx, tz, says):
+    """A ROS ``camera_info``-style matrix (or a plain sequence) holding a string: OpenCV's
+    ``FileNode.real()`` of a string is 1.8e308, and the error said "K has an entry of 1.8e+308
+    pixels" or "t has an entry of 1.8e+308 m", of a file holding neither."""
+    (tmp_path / "cam.yml").write_text(_ROS_YML.format(fx=fx, tz=tz))
+    line = assert_refused(tmp_path, 1, ["rig", "check", "cam.yml"], contains=says)
+    assert "1.8e+308" not in line
+    (tmp_path / "cam.yml").write_text(_ROS_YML.format(fx="400", tz="3"))
+    assert run_pslog("rig", "check", "cam.yml", cwd=tmp_path).code == 0
