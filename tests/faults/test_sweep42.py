@@ -12,7 +12,11 @@ an OverflowError one; a matrix holding a string or a boolean (``K = [["400", ...
 ``distortions = [false, ...]``) was read as the number numpy makes of it (400, 0), silently;
 a camera named with U+2028 (a line separator: ``str.splitlines`` breaks there) was accepted
 and cut ``fuse --rig``'s error in two lines; ``calibrate --points`` of 30,000 points asked
-for a 29 GiB matrix (the DLT's full SVD: "out of memory", exit 1), now 3 s."""
+for a 29 GiB matrix (the DLT's full SVD: "out of memory", exit 1), now 3 s. Two cameras named
+``café``, one composed and one decomposed (NFD, as macOS writes), were two cameras that look
+the same; a camera named decomposed in the rig was not found by the name typed (``import
+--detections café=FILE``) or written composed in a CSV's camera column, and the error showed
+two identical names (session 41 found the same of ``--columns``' header names)."""
 
 from __future__ import annotations
 
@@ -183,3 +187,54 @@ def test_an_opencv_sequence_holding_a_string_names_it(tmp_path, fx, tz, says):
     assert "1.8e+308" not in line
     (tmp_path / "cam.yml").write_text(_ROS_YML.format(fx="400", tz="3"))
     assert run_pslog("rig", "check", "cam.yml", cwd=tmp_path).code == 0
+
+
+_DECOMPOSED = "cafe\u0301"  # café as macOS writes file names (NFD)
+_COMPOSED = "caf\u00e9"  # café as typed (NFC)
+
+
+def test_one_name_in_two_unicode_spellings_is_a_duplicate(tmp_path):
+    """``café`` composed and decomposed as two cameras' names: accepted as two cameras whose
+    names look the same (``rig check`` listed 'café' twice), of which a name typed finds one."""
+    text = _paper3_toml().replace('name = "cam1"', f'name = "{_DECOMPOSED}"', 1).replace(
+        'name = "cam2"', f'name = "{_COMPOSED}"', 1)
+    (tmp_path / "rig.toml").write_text(text, encoding="utf-8")
+    assert_refused(tmp_path, 1, ["rig", "check", "rig.toml"],
+                   contains="are one name in two Unicode spellings")
+
+
+@pytest.mark.parametrize("how", ["CAMERA=FILE", "camera column"])
+def test_a_camera_named_decomposed_is_found_by_its_name_composed(tmp_path, how):
+    """A rig file written with ``café`` decomposed (NFD) and its name typed composed in
+    ``--detections café=FILE``, or written so in a CSV's camera column: refused as "no camera
+    'café' in the rig (it has café, cam2, cam3)", two names that look the same (as session 41
+    found for ``--columns``)."""
+    text = _paper3_toml().replace('name = "cam1"', f'name = "{_DECOMPOSED}"', 1)
+    (tmp_path / "rig.toml").write_text(text, encoding="utf-8")
+    done = run_pslog("simulate", "--rig", "rig.toml", "--timing", "typeA", "--duration", "0.5",
+                     "--seed", "71005", "-o", "s.mcap", cwd=tmp_path)
+    assert done.code == 0, done.stderr
+    done = run_pslog("export", "s.mcap", "--detections", "det.csv", cwd=tmp_path)
+    assert done.code == 0, done.stderr
+    rows = (tmp_path / "det.csv").read_text(encoding="utf-8").splitlines()
+    assert rows[0] == "camera,time,u,v,frame,score" and rows[1].startswith(_DECOMPOSED + ",")
+    if how == "CAMERA=FILE":
+        files = []
+        for name in (_DECOMPOSED, "cam2", "cam3"):
+            mine = [r.partition(",")[2] for r in rows[1:] if r.startswith(name + ",")]
+            typed = _COMPOSED if name == _DECOMPOSED else name
+            (tmp_path / f"{name}.csv").write_text("\n".join(["time,u,v,frame,score", *mine])
+                                                  + "\n", encoding="utf-8")
+            files += ["--detections", f"{typed}={name}.csv"]
+    else:
+        (tmp_path / "typed.csv").write_text(
+            "\n".join(r.replace(_DECOMPOSED + ",", _COMPOSED + ",", 1) for r in rows) + "\n",
+            encoding="utf-8")
+        files = ["--detections", "typed.csv"]
+    done = run_pslog("import", "--rig", "rig.toml", "--timing", "typeA", *files, "-o",
+                     "i.mcap", cwd=tmp_path)
+    assert done.code == 0, done.stderr
+    assert f"3 cameras ({_DECOMPOSED}, cam2, cam3)" in done.stdout
+    again = run_pslog("export", "i.mcap", "--detections", "again.csv", cwd=tmp_path)
+    assert again.code == 0, again.stderr
+    assert (tmp_path / "again.csv").read_text(encoding="utf-8").splitlines() == rows
