@@ -16,7 +16,10 @@ for a 29 GiB matrix (the DLT's full SVD: "out of memory", exit 1), now 3 s. Two 
 ``café``, one composed and one decomposed (NFD, as macOS writes), were two cameras that look
 the same; a camera named decomposed in the rig was not found by the name typed (``import
 --detections café=FILE``) or written composed in a CSV's camera column, and the error showed
-two identical names (session 41 found the same of ``--columns``' header names)."""
+two identical names (session 41 found the same of ``--columns``' header names). ``pslog
+fuse`` of a session of cameras faster than 333 fps (a rig takes up to 1e6) exited 2 blaming
+``--tolerance-ms``, not given (its default 1 ms is a third of their period or more), as
+``pslog.fuse`` failed: the default is a tenth of the period for them."""
 
 from __future__ import annotations
 
@@ -238,3 +241,24 @@ def test_a_camera_named_decomposed_is_found_by_its_name_composed(tmp_path, how):
     again = run_pslog("export", "i.mcap", "--detections", "again.csv", cwd=tmp_path)
     assert again.code == 0, again.stderr
     assert (tmp_path / "again.csv").read_text(encoding="utf-8").splitlines() == rows
+
+
+def test_a_session_of_cameras_faster_than_333_fps_fuses_without_a_tolerance(tmp_path):
+    """A rig of 500 fps cameras (``rig check`` takes up to 1e6): ``pslog fuse`` without
+    ``--tolerance-ms`` exited 2 blaming "argument --tolerance-ms" (its default 1 ms is above a
+    third of the 2 ms period), and ``pslog.fuse`` raised the same; the default is now a tenth
+    of the period for such cameras. A tolerance given too wide is still refused."""
+    import pslog
+
+    text = _paper3_toml().replace("fps = 30.0", "fps = 500.0")
+    (tmp_path / "rig.toml").write_text(text)
+    done = run_pslog("simulate", "--rig", "rig.toml", "--timing", "typeA", "--duration", "0.3",
+                     "--seed", "71007", "-o", "s.mcap", cwd=tmp_path)
+    assert done.code == 0, done.stderr
+    done = run_pslog("fuse", "s.mcap", "--method", "typeA", "-o", "f.mcap", cwd=tmp_path)
+    assert done.code == 0, done.stderr
+    assert "typeA" in done.stdout and (tmp_path / "f.mcap").is_file()
+    assert len(pslog.fuse(tmp_path / "s.mcap", methods=["typeA"]).tracks["typeA"]) > 100
+    assert_refused(tmp_path, 2, ["fuse", "s.mcap", "--method", "typeA", "--tolerance-ms", "1",
+                                 "-o", "g.mcap"],
+                   contains="argument --tolerance-ms: tolerance 1 ms must be below a third")
