@@ -19,7 +19,7 @@ the same; a camera named decomposed in the rig was not found by the name typed (
 two identical names (session 41 found the same of ``--columns``' header names). ``pslog
 fuse`` of a session of cameras faster than 333 fps (a rig takes up to 1e6) exited 2 blaming
 ``--tolerance-ms``, not given (its default 1 ms is a third of their period or more), as
-``pslog.fuse`` failed: the default is a tenth of the period for them."""
+``pslog.fuse`` and ``pslog live`` failed: the default is a tenth of the period for them."""
 
 from __future__ import annotations
 
@@ -262,3 +262,17 @@ def test_a_session_of_cameras_faster_than_333_fps_fuses_without_a_tolerance(tmp_
     assert_refused(tmp_path, 2, ["fuse", "s.mcap", "--method", "typeA", "--tolerance-ms", "1",
                                  "-o", "g.mcap"],
                    contains="argument --tolerance-ms: tolerance 1 ms must be below a third")
+
+
+def test_live_of_cameras_faster_than_333_fps_runs(tmp_path):
+    """``pslog live`` of a 500 fps rig fused with the default options' 1 ms tolerance and
+    stopped at once: "tolerance 1 ms must be below a third of the frame period" (exit 1)."""
+    text = _paper3_toml().replace("fps = 30.0", "fps = 500.0")
+    (tmp_path / "rig.toml").write_text(text)
+    done = run_pslog("live", "--rig", "rig.toml", "--synthetic", "--timing", "typeA",
+                     "--duration", "0.5", "--listen", "udp://127.0.0.1:0", "--jsonl",
+                     "--record", "live.mcap", cwd=tmp_path, timeout=120)
+    assert done.code == 0, done.stderr
+    assert "tolerance" not in done.stderr
+    assert done.stdout.count("\n") > 50  # points, one JSON line each
+    assert (tmp_path / "live.mcap").is_file()
