@@ -595,6 +595,24 @@ def rig_to_opencv(rig: Rig, suffix: str = ".yml", units: str = "m") -> str:
     holding ``camera_name``, ``image_width``, ``image_height``, ``camera_matrix``,
     ``distortion_coefficients`` (1 x 5), ``R`` (3 x 3), ``rvec``, ``T`` (3 x 1, ``units``)
     and pslog's timing keys. Doubles are written with 17 significant digits: exact."""
+    text = _opencv_text(rig, suffix, units)
+    if not _names_read_back(rig, text):
+        kind = _OPENCV_KIND.get(suffix.lower(), "YAML")
+        bad = _first_lost_name(rig, text, suffix)
+        ok = [s for s in (".xml", ".json", ".yml") if _OPENCV_KIND[s] != kind
+              and _names_read_back(rig, _opencv_text(rig, s, units))]
+        raise RigError(f"name {bad!r} does not survive OpenCV's {kind} writer (its reader "
+                       f"takes it for another value, or cannot read the file): rename it"
+                       + (f", or write {' or '.join(ok)}" if ok else ""))
+    return text
+
+
+#: the FileStorage format of each OpenCV suffix
+_OPENCV_KIND = {".yml": "YAML", ".yaml": "YAML", ".xml": "XML", ".json": "JSON"}
+
+
+def _opencv_text(rig: Rig, suffix: str, units: str) -> str:
+    """:func:`rig_to_opencv`'s text, names unchecked (its names may not read back)."""
     import cv2
 
     flags = cv2.FILE_STORAGE_WRITE | cv2.FILE_STORAGE_MEMORY
@@ -618,6 +636,41 @@ def rig_to_opencv(rig: Rig, suffix: str = ".yml", units: str = "m") -> str:
     if rig.name:
         storage.write("rig_name", rig.name)
     return storage.releaseAndGetString()
+
+
+def _read_back_names(text: str) -> tuple[list[str], str] | None:
+    """The camera names and rig name OpenCV's reader finds in ``text``; None if it cannot
+    read it."""
+    try:
+        cameras, name = _opencv_cameras(text, "export")
+    except RigError:
+        return None
+    return [c["name"] for c in cameras], name
+
+
+def _names_read_back(rig: Rig, text: str) -> bool:
+    """Whether ``text`` reads back with ``rig``'s camera names and rig name: OpenCV's YAML
+    writer leaves ``null`` and ``true`` unquoted (read back as no string and as 1: the
+    camera came back named ``camera_1``), and its YAML and JSON writers write a name ``'``
+    as a file neither reader reads."""
+    return _read_back_names(text) == (list(rig.names), rig.name)
+
+
+def _first_lost_name(rig: Rig, text: str, suffix: str) -> str:
+    """The first of ``rig``'s names that ``text`` (its OpenCV text) does not read back."""
+    back = _read_back_names(text)
+    if back is not None:
+        for mine, theirs in zip(rig.names, back[0], strict=False):
+            if mine != theirs:
+                return mine
+        if back[1] != rig.name:
+            return rig.name
+    # (unreadable: the first name OpenCV's writer cannot write alone)
+    for cam in rig.cameras:
+        alone = Rig((cam.replace(clock_offset=0.0, clock_drift_ppm=0.0),))
+        if not _names_read_back(alone, _opencv_text(alone, suffix, "m")):
+            return cam.name
+    return rig.name
 
 
 def rig_to_format(rig: Rig, fmt: str, units: str = "m", suffix: str = ".yml") -> str:
