@@ -23,7 +23,8 @@ fuse`` of a session of cameras faster than 333 fps (a rig takes up to 1e6) exite
 ``rig export --format opencv`` of a camera (or rig) named ``null`` or ``true`` wrote them
 unquoted in YAML (OpenCV's writer), read back as another value (the camera came back named
 ``camera_1``, silently), and of one named ``'`` a YAML or JSON file no reader reads: refused,
-naming the formats that keep the name."""
+naming the formats that keep the name. ``rig import --offset`` of one camera twice wrote the
+last, silently."""
 
 from __future__ import annotations
 
@@ -310,3 +311,18 @@ def test_an_opencv_export_never_writes_a_name_it_cannot_read_back(tmp_path, name
     back = tomllib.loads((tmp_path / "back.toml").read_text())
     assert (back.get("name"), [c["name"] for c in back["camera"]]) == (
         tomllib.loads(text).get("name"), [c["name"] for c in tomllib.loads(text)["camera"]])
+
+
+def test_rig_import_refuses_a_camera_offset_given_twice(tmp_path):
+    """``rig import --offset cam2=0.01 --offset cam2=0.02``: the last one was written,
+    silently (``simulate --clock-offset`` and ``import --detections`` refuse a camera given
+    twice)."""
+    (tmp_path / "calibration.toml").write_text(_anipose_toml(tmp_path))
+    assert_refused(tmp_path, 2, ["rig", "import", "calibration.toml", "--offset", "cam2=0.01",
+                                 "--offset", "cam2=0.02", "-o", "rig.toml"],
+                   contains="argument --offset: camera cam2 given twice (0.01, 0.02)")
+    done = run_pslog("rig", "import", "calibration.toml", "--offset", "cam2=0.01", "--offset",
+                     "cam3=0.02", "-o", "rig.toml", cwd=tmp_path)
+    assert done.code == 0, done.stderr
+    offsets = [c["offset"] for c in tomllib.loads((tmp_path / "rig.toml").read_text())["camera"]]
+    assert offsets == [0.0, 0.01, 0.02]
