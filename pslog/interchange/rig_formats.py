@@ -361,6 +361,8 @@ def _toml_camera(section: str, table: dict, source: str, fmt: str) -> dict:
                if k not in table]
     if missing:
         raise RigError(f"{where}: missing key(s) {', '.join(missing)}")
+    if "fisheye" in table and not isinstance(table["fisheye"], bool):  # ("true" was not one)
+        raise RigError(f"{where}: fisheye must be true or false, got {_short(table['fisheye'])}")
     if table.get("fisheye") is True:
         raise RigError(f"{where}: a fisheye camera (OpenCV's fisheye model): pslog's cameras "
                        f"are plumb_bob ({_DIST_NAMES})")

@@ -24,7 +24,7 @@ fuse`` of a session of cameras faster than 333 fps (a rig takes up to 1e6) exite
 unquoted in YAML (OpenCV's writer), read back as another value (the camera came back named
 ``camera_1``, silently), and of one named ``'`` a YAML or JSON file no reader reads: refused,
 naming the formats that keep the name. ``rig import --offset`` of one camera twice wrote the
-last, silently."""
+last, silently; a Pose2Sim table's ``fisheye = "true"`` (a string) was read as not fisheye."""
 
 from __future__ import annotations
 
@@ -326,3 +326,13 @@ def test_rig_import_refuses_a_camera_offset_given_twice(tmp_path):
     assert done.code == 0, done.stderr
     offsets = [c["offset"] for c in tomllib.loads((tmp_path / "rig.toml").read_text())["camera"]]
     assert offsets == [0.0, 0.01, 0.02]
+
+
+def test_a_pose2sim_fisheye_that_is_no_boolean_is_refused(tmp_path):
+    """``fisheye = "true"`` (quoted by hand) in a Pose2Sim camera table: taken as not
+    fisheye, and the fisheye lens read as plumb_bob, silently."""
+    text = _anipose_toml(tmp_path, "pose2sim")
+    assert "fisheye = false" in text
+    (tmp_path / "Calib.toml").write_text(text.replace("fisheye = false", 'fisheye = "true"', 1))
+    assert_refused(tmp_path, 1, ["rig", "check", "Calib.toml"],
+                   contains="[cam_01]: fisheye must be true or false, got 'true'")
