@@ -24,7 +24,9 @@ fuse`` of a session of cameras faster than 333 fps (a rig takes up to 1e6) exite
 unquoted in YAML (OpenCV's writer), read back as another value (the camera came back named
 ``camera_1``, silently), and of one named ``'`` a YAML or JSON file no reader reads: refused,
 naming the formats that keep the name. ``rig import --offset`` of one camera twice wrote the
-last, silently; a Pose2Sim table's ``fisheye = "true"`` (a string) was read as not fisheye."""
+last, silently; a Pose2Sim table's ``fisheye = "true"`` (a string) was read as not
+fisheye. ``eval --truth`` of a truth whose one gap holds every point said "no point inside the
+ground truth's span"."""
 
 from __future__ import annotations
 
@@ -336,3 +338,24 @@ def test_a_pose2sim_fisheye_that_is_no_boolean_is_refused(tmp_path):
     (tmp_path / "Calib.toml").write_text(text.replace("fisheye = false", 'fisheye = "true"', 1))
     assert_refused(tmp_path, 1, ["rig", "check", "Calib.toml"],
                    contains="[cam_01]: fisheye must be true or false, got 'true'")
+
+
+def test_eval_of_a_truth_whose_gaps_hold_every_point_says_so(tmp_path):
+    """A truth (motion capture) with a position at its first and last rows only, the marker
+    lost between: every track point lies inside its span, in its gap, and ``eval --truth``
+    said "track 'typeA' has no point inside the ground truth's span"."""
+    done = run_pslog("simulate", "--rig", "paper3", "--timing", "typeA", "--duration", "0.5",
+                     "--seed", "71009", "-o", "s.mcap", cwd=tmp_path)
+    assert done.code == 0, done.stderr
+    for args in (["fuse", "s.mcap", "--method", "typeA", "-o", "f.mcap"],
+                 ["export", "f.mcap", "--tum", "tum"]):
+        done = run_pslog(*args, cwd=tmp_path)
+        assert done.code == 0, done.stderr
+    rows = [r.split() for r in (tmp_path / "tum" / "truth.tum").read_text().splitlines()
+            if not r.startswith("#")]
+    lines = ["t,x,y,z"] + [",".join(r[:4]) if i in (0, len(rows) - 1) else f"{r[0]},,,"
+                           for i, r in enumerate(rows)]
+    (tmp_path / "truth.csv").write_text("\n".join(lines) + "\n")
+    line = assert_refused(tmp_path, 1, ["eval", "f.mcap", "--truth", "truth.csv"],
+                          contains="or each in a gap of it")
+    assert "no point inside the ground truth's span" not in line
