@@ -158,6 +158,7 @@ def fuse(session: Session | str | os.PathLike[str] | Detections,
         FusionOptions,
         check_method,
         default_methods,
+        default_tolerance,
         for_session,
         offline_confirmation,
     )
@@ -187,6 +188,8 @@ def fuse(session: Session | str | os.PathLike[str] | Detections,
             rig = resolve_rig(os.fspath(rig), timing_from=read.rig,  # a calibration: geometry
                               metadata=rig_metadata)
         detections, used = read.detections, rig or read.rig
+        if options is None and isinstance(used, Rig):  # (1 ms, or less for fast cameras)
+            options = FusionOptions(tolerance_s=default_tolerance(used))
         options = for_session(options or FusionOptions(), read.metadata,
                               used if clock_uncertainty else None, rig_metadata)
         if rig is not None and rig.names != read.rig.names:

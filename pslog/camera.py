@@ -53,15 +53,17 @@ def check_camera_name(name) -> str:
     """``name`` if it is usable as a camera name, else :class:`RigError` saying why.
 
     A name is a CSV cell and a part of MCAP topics: non-empty, at most 64 characters, no
-    control characters (newlines, tabs...), none of ``,`` ``"`` ``/``, no surrounding spaces.
+    control characters or line breaks (newlines, tabs, U+2028...), none of ``,`` ``"`` ``/``,
+    no surrounding spaces.
     """
     if not isinstance(name, str) or not name:
         raise RigError(f"camera name must be a non-empty string, got {name!r}")
     why = None
     if len(name) > _NAME_MAX_LENGTH:
         why = f"longer than {_NAME_MAX_LENGTH} characters"
-    elif any(ord(ch) < 0x20 or 0x7F <= ord(ch) < 0xA0 for ch in name):
-        why = "holds a control character (newline, tab, ...)"
+    elif any(ord(ch) < 0x20 or 0x7F <= ord(ch) < 0xA0 or ch in "\u2028\u2029"
+             for ch in name):  # (U+2028, U+2029: line breaks to str.splitlines)
+        why = "holds a control character or line break (newline, tab, ...)"
     elif any(ch in _NAME_FORBIDDEN for ch in name):
         why = "holds one of , \" / (names are CSV cells and parts of MCAP topics)"
     elif name != name.strip():
@@ -71,13 +73,27 @@ def check_camera_name(name) -> str:
     return name
 
 
+def holds_non_number(value) -> bool:
+    """Whether ``value`` (a number, or nested lists, tuples or arrays of numbers) holds
+    anything but real numbers: a string or a boolean, which ``np.array(value, float)`` would
+    silently read as a number (a rig's ``K = [["400", ...]]`` as 400, ``true`` as 1)."""
+    if isinstance(value, np.ndarray):
+        return value.dtype.kind not in "iuf"
+    if isinstance(value, list | tuple):
+        return any(holds_non_number(v) for v in value)
+    return (isinstance(value, bool | np.bool_)
+            or not isinstance(value, int | float | np.integer | np.floating))
+
+
 def _as_array(value, shape: tuple[int, ...], name: str, camera: str) -> np.ndarray:
     try:
         array = np.array(value, dtype=np.float64)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):  # (an integer beyond any float: 10**400)
         raise RigError(f"camera {camera!r}: {name} is not numeric: {value!r}") from None
     if array.shape != shape:
         raise RigError(f"camera {camera!r}: {name} must have shape {shape}, got {array.shape}")
+    if holds_non_number(value):  # (after the shape: nested at most two deep)
+        raise RigError(f"camera {camera!r}: {name} is not numeric: {value!r}")
     if not np.all(np.isfinite(array)):
         raise RigError(f"camera {camera!r}: {name} has non-finite values")
     array.setflags(write=False)
@@ -175,6 +191,11 @@ class Camera:
             value = getattr(self, key)
             if isinstance(value, bool) or not isinstance(value, (int, float, np.number)):
                 raise RigError(f"camera {name!r}: {key} must be a number, got {value!r}")
+            try:  # (an integer beyond int64, e.g. TOML's fps = 2**70: np.isfinite refuses it)
+                value = float(value)
+            except OverflowError:
+                raise RigError(f"camera {name!r}: {key} must be finite, got an integer beyond "
+                               f"any float") from None
             if not np.isfinite(value):
                 raise RigError(f"camera {name!r}: {key} must be finite, got {value!r}")
             # clock keys + 0.0: -0.0 becomes 0.0 (so "written when non-zero" loses nothing)

@@ -74,7 +74,10 @@ def _accuracy(track: Track, err: np.ndarray) -> Accuracy:
     """:func:`evaluate` of ``track`` given its points' errors (:func:`errors_m`)."""
     err = err[np.isfinite(err)] * 1e3
     if len(err) == 0:
-        raise InputError(f"track {track.method!r} has no point inside the ground truth's span")
+        # (NaN errors: outside the truth's span, or in its gaps: "no point inside the span"
+        # was said of a track whose every point lay inside it, in gaps)
+        raise InputError(f"track {track.method!r} has no point the ground truth scores (none "
+                         f"inside its span, or each in a gap of it: rows without a position)")
     return Accuracy(
         method=track.method, n_points=len(err), rate_hz=float(output_rate_hz(track.time_ns)),
         mean_mm=float(err.mean()), median_mm=float(np.median(err)),

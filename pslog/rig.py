@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import math
 import tomllib
+import unicodedata
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -49,6 +50,11 @@ _TOP_KEYS = {"name", "camera"}
 _CLOCK_KEYS = ("clock_offset", "clock_drift_ppm", "readout")
 _CAMERA_KEYS = {"name", "width", "height", "K", "dist", "R", "t", "fps", "offset", *_CLOCK_KEYS}
 _CAMERA_REQUIRED = _CAMERA_KEYS - {"dist", *_CLOCK_KEYS}
+
+
+def _composed(name: str) -> str:
+    """``name`` in Unicode's composed form (NFC): the form a name typed usually has."""
+    return unicodedata.normalize("NFC", name)
 
 
 @dataclass(frozen=True)
@@ -74,6 +80,12 @@ class Rig:
         duplicates = sorted({n for n in names if names.count(n) > 1})
         if duplicates:
             raise RigError(f"camera names must be unique, repeated: {', '.join(duplicates)}")
+        composed = [_composed(n) for n in names]
+        twins = [n for n, c in zip(names, composed, strict=True) if composed.count(c) > 1]
+        if twins:  # two spellings of one name: they look the same, and a name typed is one
+            raise RigError(f"camera names must be unique: {' and '.join(map(repr, twins))} "
+                           f"are one name in two Unicode spellings (composed and decomposed "
+                           f"accents)")
         first = cameras[0]
         if first.clock_offset or first.clock_drift_ppm:
             raise RigError(
@@ -89,12 +101,22 @@ class Rig:
     def names(self) -> tuple[str, ...]:
         return tuple(c.name for c in self.cameras)
 
+    def spelling(self, name: str) -> str | None:
+        """The rig's own spelling of camera ``name``: ``name``, or the camera name that is
+        ``name`` in another Unicode spelling (``café`` typed composed, written decomposed in
+        the rig file, as macOS does); None when the rig has no such camera."""
+        if name in self.names:
+            return name
+        want = _composed(name)
+        return next((n for n in self.names if _composed(n) == want), None)
+
     def index(self, name: str) -> int:
-        """Camera index of ``name``; :class:`RigError` naming it when unknown."""
-        try:
-            return self.names.index(name)
-        except ValueError:
-            raise RigError(f"unknown camera {name!r} (rig has {', '.join(self.names)})") from None
+        """Camera index of ``name`` (in either Unicode spelling: :meth:`spelling`);
+        :class:`RigError` naming it when unknown."""
+        own = self.spelling(name)
+        if own is None:
+            raise RigError(f"unknown camera {name!r} (rig has {', '.join(self.names)})")
+        return self.names.index(own)
 
     def camera(self, name: str) -> Camera:
         return self.cameras[self.index(name)]
@@ -126,11 +148,7 @@ class Rig:
     @classmethod
     def from_toml(cls, text: str, source: str = "rig") -> Rig:
         """Parse and validate rig TOML; errors name ``source``, the camera and the key."""
-        try:
-            data = tomllib.loads(text)
-        except tomllib.TOMLDecodeError as exc:
-            raise RigError(f"{source}: malformed TOML: {exc}") from None
-        return cls.from_dict(data, source)
+        return cls.from_dict(parse_toml(text, source), source)
 
     @classmethod
     def from_dict(cls, data: dict, source: str = "rig") -> Rig:
@@ -163,6 +181,23 @@ class Rig:
             return cls(tuple(cameras), name)
         except RigError as exc:
             raise RigError(f"{source}: {exc}") from None
+
+
+def parse_toml(text: str, source: str) -> dict:
+    """``tomllib.loads(text)``; :class:`RigError` naming ``source`` if malformed, nested too
+    deeply for Python's stack (``K = [[[[...]]]]`` a few hundred deep: tomllib parses arrays
+    recursively, and its RecursionError was a traceback) or holding an integer beyond Python's
+    4300 digits (its ValueError, likewise)."""
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise RigError(f"{source}: malformed TOML: {exc}") from None
+    except RecursionError:
+        raise RigError(f"{source}: malformed TOML: arrays or tables nested too deeply (a "
+                       f"rig's deepest is a matrix, two levels)") from None
+    except ValueError as exc:  # (not a TOMLDecodeError: an integer of over 4300 digits)
+        raise RigError(f"{source}: malformed TOML: a number of more digits than any rig's "
+                       f"({str(exc).partition(';')[0]})") from None
 
 
 def load_rig(path: str | Path, fmt: str = "auto", options=None) -> Rig:

@@ -255,7 +255,8 @@ def dlt_projection_matrix(points_world: np.ndarray, uv: np.ndarray) -> np.ndarra
     A[0::2, 8:12] = -x[:, 0:1] * X
     A[1::2, 4:8] = X
     A[1::2, 8:12] = -x[:, 1:2] * X
-    P_normalized = np.linalg.svd(A)[2][-1].reshape(3, 4)
+    # (full_matrices=False: the full U of 2n x 2n was 29 GiB for 30,000 points)
+    P_normalized = np.linalg.svd(A, full_matrices=False)[2][-1].reshape(3, 4)
     P = np.linalg.inv(T_image) @ P_normalized @ T_world
     return P / np.linalg.norm(P[2, :3])
 

@@ -18,7 +18,7 @@ from ._common import installed_command, seconds_at_most
 
 #: the shortest demo, seconds: three frames of each of its 30 fps cameras (a shorter throw
 #: failed after recording it: 'no such file: session.mcap' below a frame period, 'track
-#: 'typeA' has no point inside the ground truth's span' below two frames of each camera)
+#: 'typeA' has no point the ground truth scores' below two frames of each camera)
 MIN_DEMO_S = 0.1
 
 

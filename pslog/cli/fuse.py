@@ -37,10 +37,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
              "rates, offsets and synced clocks stay); a pslog rig TOML or a session file "
              "gives its whole rig, timing and clocks included (e.g. a synced session's; a "
              "frame rate other than the session's rig's is said in a note)")
-    parser.add_argument("--tolerance-ms", type=nonnegative_float, default=1.0,
+    parser.add_argument("--tolerance-ms", type=nonnegative_float, default=None,
                         metavar="MS", help="detections this close in time count as "
                                            "simultaneous, milliseconds, below a third of the "
-                                           "frame period (default %(default)s)")
+                                           "frame period (default 1, or a tenth of the frame "
+                                           "period for cameras faster than 333 fps)")
     parser.add_argument("--max-gap-ms", default=None,
                         type=number_at_most(3.6e6, "ms", "an hour", positive=True),
                         metavar="MS", help="longest time span a method may bridge, "
@@ -149,6 +150,7 @@ def run(args: argparse.Namespace) -> int:
         check_method,
         check_tolerance,
         default_methods,
+        default_tolerance,
         for_session,
     )
     from pslog.fusion._parallel import finishing_order
@@ -181,12 +183,15 @@ def run(args: argparse.Namespace) -> int:
                   f"rig.toml', then --rig rig.toml)")
         _say_other_frame_rates(args.rig, rig, session)
     check_baselines(rig, args.session if args.rig is None else args.rig)
+    # (not given: 1 ms, or less for cameras too fast for it, rather than a refusal of an
+    # option the command line does not hold)
+    tolerance_s = default_tolerance(rig) if args.tolerance_ms is None else args.tolerance_ms / 1e3
     try:
-        check_tolerance(rig, args.tolerance_ms / 1e3)
+        check_tolerance(rig, tolerance_s)
     except FusionError as exc:
         return usage_error("fuse", f"argument --tolerance-ms: {exc}")
     confirm = CONFIRM_GAPS[args.confirm_gaps or "kicks"]  # (None: not given; said if unused)
-    options = FusionOptions(tolerance_s=args.tolerance_ms / 1e3,
+    options = FusionOptions(tolerance_s=tolerance_s,
                             max_gap_s=None if args.max_gap_ms is None else args.max_gap_ms / 1e3,
                             rate_hz=args.rate, noise_px=args.noise_px,
                             gating=args.gating == "on",

@@ -152,7 +152,8 @@ def _named_files(values: list[str], rig) -> dict[str, str] | int:
 
     def camera_of(value: str) -> str | None:
         name, sep, _path = split(value)
-        if not sep or (name not in rig.names and len(values) == 1 and os.path.exists(value)):
+        if not sep or (rig.spelling(name) is None and len(values) == 1
+                       and os.path.exists(value)):
             return None  # (a file named with an '=' given alone: taken whole)
         return name
 
@@ -162,10 +163,11 @@ def _named_files(values: list[str], rig) -> dict[str, str] | int:
     named: dict[str, str] = {}
     for value, name in zip(values, names, strict=True):
         path = split(value)[2]
-        if name is None or name not in rig.names:
+        if name is None or rig.spelling(name) is None:
             return usage_error("import", f"argument --detections {value}: no camera "
                                          f"{name!r} in the rig (it has {', '.join(rig.names)}); "
                                          f"give CAMERA=FILE, the rig's name for the camera")
+        name = rig.spelling(name)  # (the rig's own Unicode spelling of it)
         if not path.strip():
             return usage_error("import", f"argument --detections {value}: empty file name")
         if not os.path.lexists(path) and os.path.lexists(value):

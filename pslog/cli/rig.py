@@ -200,6 +200,11 @@ def _import(args: argparse.Namespace) -> int:
     from ._common import PSLOG_RIG, misnamed, usage_error
 
     offsets = dict(args.offset)
+    twice = sorted({n for n, _ in args.offset if [m for m, _ in args.offset].count(n) > 1})
+    if twice:  # (the last taken, silently; as import's --detections, refused)
+        given = ", ".join(f"{v:g}" for n, v in args.offset if n == twice[0])
+        return usage_error("rig import", f"argument --offset: camera {twice[0]} given twice "
+                                         f"({given}): give each camera once")
     if args.timing and offsets:  # (bad command lines: exit 2, as argparse's own)
         return usage_error("rig import", "give --timing or --offset, not both")
     # a pslog rig is TOML: under an OpenCV name ('-o cams.yml') pslog itself would read it

@@ -71,7 +71,9 @@ class FusionOptions:
     ----------
     tolerance_s : float, detections this close in time count as simultaneous (sync, typeB,
         linear), seconds; no group spans more, and the methods refuse a tolerance of a third
-        of the rig's shortest frame period or more (:func:`check_tolerance`)
+        of the rig's shortest frame period or more (:func:`check_tolerance`); ``pslog fuse``
+        and :func:`pslog.fuse` without options take :func:`default_tolerance` (this 1 ms, or
+        a tenth of the period of cameras faster than 333 fps)
     max_gap_s : float or None, longest time span a method may bridge (brackets, predictions,
         pairing; for smooth, the longest time without a detection inside one trajectory
         piece); None: 3.5 frame periods of the slowest camera
@@ -480,6 +482,16 @@ def check_tolerance(rig: Rig, tolerance_s: float) -> float:
     return tolerance_s
 
 
+def default_tolerance(rig: Rig) -> float:
+    """The tolerance used where none was given, seconds: :class:`FusionOptions`' 1 ms where
+    that is below a third of the rig's shortest frame period (cameras up to 333 fps), else a
+    tenth of that period (0.2 ms at 500 fps: 1 ms was refused by :func:`check_tolerance`, and
+    ``pslog fuse`` of such a session failed without ``--tolerance-ms``)."""
+    tolerance = FusionOptions.tolerance_s
+    fastest = min(c.frame_period for c in rig.cameras)
+    return tolerance if tolerance < fastest / 3 else fastest / 10
+
+
 def check_method(method: str) -> str:
     if method not in METHODS:
         raise FusionError(f"unknown fusion method {method!r} (have {', '.join(METHODS)})")
@@ -731,7 +743,8 @@ def type_a_explained(prep: Prepared, rig: Rig, options: FusionOptions
 
 __all__ = [
     "DETECTOR_OFFSET_M", "METHODS", "FusionOptions", "Method", "Prepared", "PseudoStereoPoints",
-    "TypeAConstruction", "causal_methods", "check_method", "check_tolerance", "default_methods",
+    "TypeAConstruction", "causal_methods", "check_method", "check_tolerance",
+    "default_methods", "default_tolerance",
     "detector_bias_for", "explain_type_a", "for_session", "fuse", "fuse_all",
     "offline_confirmation", "prepare", "pseudo_stereo_points", "type_a_prepared",
 ]

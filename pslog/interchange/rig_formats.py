@@ -41,16 +41,15 @@ from __future__ import annotations
 
 import math
 import re
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from ..camera import Camera
+from ..camera import Camera, holds_non_number
 from ..errors import RigError, shell_word
-from ..rig import Rig
+from ..rig import Rig, parse_toml
 
 #: formats a rig file may be in (``pslog`` is pslog's own TOML, pslog/rig.py)
 FORMATS = ("pslog", "anipose", "pose2sim", "opencv")
@@ -127,12 +126,12 @@ def detect_format(text: str, path: str | Path) -> tuple[str, dict[str, Any] | No
     if Path(path).suffix.lower() in OPENCV_SUFFIXES:
         return "opencv", None
     try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
+        data = parse_toml(text, source)
+    except RigError:
         head = text.lstrip()[:16]
         if head.startswith(("%YAML", "<?xml", "<opencv_storage")):
             return "opencv", None
-        raise RigError(f"{source}: malformed TOML: {exc}") from None
+        raise
     if "camera" in data or set(data) <= {"name"}:
         return "pslog", data  # pslog's own checks say what is wrong with it
     tables = _camera_tables(data)
@@ -195,10 +194,7 @@ def parse_rig_text(text: str, path: str | Path, fmt: str = "auto",
         return RigFile(_with_timing(rig, options, source), "pslog", "m", True)
     if detected in ("anipose", "pose2sim"):
         if data is None:
-            try:
-                data = tomllib.loads(text)
-            except tomllib.TOMLDecodeError as exc:
-                raise RigError(f"{source}: malformed TOML: {exc}") from None
+            data = parse_toml(text, source)
         # every table but the ones the two tools keep beside their cameras is a camera: a
         # camera table without a matrix is an error, not a camera silently left out
         tables = [(k, v) for k, v in data.items()
@@ -307,11 +303,13 @@ def _array(value, shapes: tuple[tuple[int, ...], ...], key: str, where: str) -> 
     """``value`` as a finite float64 array of one of ``shapes``; RigError naming ``key``."""
     try:
         array = np.array(value, dtype=np.float64)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):  # (an integer beyond any float: 10**400)
         raise RigError(f"{where}: {key} is not numeric: {_short(value)}") from None
     if array.shape not in shapes:
         want = " or ".join(str(s) for s in shapes)
         raise RigError(f"{where}: {key} must have shape {want}, got {array.shape}")
+    if holds_non_number(value):  # ("400" or true, which numpy reads as 400 or 1)
+        raise RigError(f"{where}: {key} is not numeric: {_short(value)}")
     if not np.all(np.isfinite(array)):
         raise RigError(f"{where}: {key} has non-finite values")
     return array
@@ -363,6 +361,8 @@ def _toml_camera(section: str, table: dict, source: str, fmt: str) -> dict:
                if k not in table]
     if missing:
         raise RigError(f"{where}: missing key(s) {', '.join(missing)}")
+    if "fisheye" in table and not isinstance(table["fisheye"], bool):  # ("true" was not one)
+        raise RigError(f"{where}: fisheye must be true or false, got {_short(table['fisheye'])}")
     if table.get("fisheye") is True:
         raise RigError(f"{where}: a fisheye camera (OpenCV's fisheye model): pslog's cameras "
                        f"are plumb_bob ({_DIST_NAMES})")
@@ -451,6 +451,19 @@ def _opencv_node(node, keys: tuple[str, ...], where: str, required: bool = True)
     return None, None
 
 
+def _node_numbers(seq, key: str, where: str) -> list[float]:
+    """The numbers of a FileStorage sequence node; RigError naming ``key`` for an item that
+    is not one (``real()`` of a string is 1.8e308: "K has an entry of 1.8e+308 pixels")."""
+    values = []
+    for i in range(seq.size()):
+        item = seq.at(i)
+        if not (item.isReal() or item.isInt()):
+            shown = repr(item.string()) if item.isString() else "not a number"
+            raise RigError(f"{where}: {key} is not numeric: item {i + 1} is {shown}")
+        values.append(item.real())
+    return values
+
+
 def _opencv_matrix(node, key: str, where: str) -> np.ndarray:
     """A matrix node: ``!!opencv-matrix`` (``rows``, ``cols``, ``dt``, ``data``), a ROS
     ``camera_info`` map (``rows``, ``cols``, ``data``), or a plain sequence of numbers."""
@@ -460,14 +473,14 @@ def _opencv_matrix(node, key: str, where: str) -> np.ndarray:
         rows, cols, data = (node.getNode(k) for k in ("rows", "cols", "data"))
         if rows.empty() or cols.empty() or not data.isSeq():
             raise RigError(f"{where}: {key} is a map without rows, cols and data")
-        values = [data.at(i).real() for i in range(data.size())]
+        values = _node_numbers(data, key, where)
         shape = (int(rows.real()), int(cols.real()))
         if shape[0] * shape[1] != len(values):
             raise RigError(f"{where}: {key} has {len(values)} values for {shape[0]} x "
                            f"{shape[1]}")
         return np.array(values, dtype=np.float64).reshape(shape)
     if node.isSeq():
-        return np.array([node.at(i).real() for i in range(node.size())], dtype=np.float64)
+        return np.array(_node_numbers(node, key, where), dtype=np.float64)
     try:
         value = node.mat()
     except cv2.error:
@@ -584,6 +597,24 @@ def rig_to_opencv(rig: Rig, suffix: str = ".yml", units: str = "m") -> str:
     holding ``camera_name``, ``image_width``, ``image_height``, ``camera_matrix``,
     ``distortion_coefficients`` (1 x 5), ``R`` (3 x 3), ``rvec``, ``T`` (3 x 1, ``units``)
     and pslog's timing keys. Doubles are written with 17 significant digits: exact."""
+    text = _opencv_text(rig, suffix, units)
+    if not _names_read_back(rig, text):
+        kind = _OPENCV_KIND.get(suffix.lower(), "YAML")
+        bad = _first_lost_name(rig, text, suffix)
+        ok = [s for s in (".xml", ".json", ".yml") if _OPENCV_KIND[s] != kind
+              and _names_read_back(rig, _opencv_text(rig, s, units))]
+        raise RigError(f"name {bad!r} does not survive OpenCV's {kind} writer (its reader "
+                       f"takes it for another value, or cannot read the file): rename it"
+                       + (f", or write {' or '.join(ok)}" if ok else ""))
+    return text
+
+
+#: the FileStorage format of each OpenCV suffix
+_OPENCV_KIND = {".yml": "YAML", ".yaml": "YAML", ".xml": "XML", ".json": "JSON"}
+
+
+def _opencv_text(rig: Rig, suffix: str, units: str) -> str:
+    """:func:`rig_to_opencv`'s text, names unchecked (its names may not read back)."""
     import cv2
 
     flags = cv2.FILE_STORAGE_WRITE | cv2.FILE_STORAGE_MEMORY
@@ -607,6 +638,41 @@ def rig_to_opencv(rig: Rig, suffix: str = ".yml", units: str = "m") -> str:
     if rig.name:
         storage.write("rig_name", rig.name)
     return storage.releaseAndGetString()
+
+
+def _read_back_names(text: str) -> tuple[list[str], str] | None:
+    """The camera names and rig name OpenCV's reader finds in ``text``; None if it cannot
+    read it."""
+    try:
+        cameras, name = _opencv_cameras(text, "export")
+    except RigError:
+        return None
+    return [c["name"] for c in cameras], name
+
+
+def _names_read_back(rig: Rig, text: str) -> bool:
+    """Whether ``text`` reads back with ``rig``'s camera names and rig name: OpenCV's YAML
+    writer leaves ``null`` and ``true`` unquoted (read back as no string and as 1: the
+    camera came back named ``camera_1``), and its YAML and JSON writers write a name ``'``
+    as a file neither reader reads."""
+    return _read_back_names(text) == (list(rig.names), rig.name)
+
+
+def _first_lost_name(rig: Rig, text: str, suffix: str) -> str:
+    """The first of ``rig``'s names that ``text`` (its OpenCV text) does not read back."""
+    back = _read_back_names(text)
+    if back is not None:
+        for mine, theirs in zip(rig.names, back[0], strict=False):
+            if mine != theirs:
+                return mine
+        if back[1] != rig.name:
+            return rig.name
+    # (unreadable: the first name OpenCV's writer cannot write alone)
+    for cam in rig.cameras:
+        alone = Rig((cam.replace(clock_offset=0.0, clock_drift_ppm=0.0),))
+        if not _names_read_back(alone, _opencv_text(alone, suffix, "m")):
+            return cam.name
+    return rig.name
 
 
 def rig_to_format(rig: Rig, fmt: str, units: str = "m", suffix: str = ".yml") -> str:

@@ -440,7 +440,7 @@ class LiveFuser:
                  options=None, candidates: bool = True, epoch_ns: int | None = None,
                  silent_after_s: float = 1.0, clock=time.time_ns, keep: bool = True,
                  hold_s: float = 0.0, future_s: float = 5.0, monotonic=None) -> None:
-        from ..fusion import FusionOptions, check_method
+        from ..fusion import FusionOptions, check_method, default_tolerance
         from ..fusion._prepare import default_max_gap_s
         from ..fusion.gating import _clock_model, _true_time_ns
         from ..fusion.stream import StreamFuser
@@ -462,7 +462,9 @@ class LiveFuser:
         # (a point per shutter at once: typeA's long-gap points are not held for the next
         # camera's confirmation, pslog.fusion.confirm, nor the filter's surprising ones,
         # FusionOptions.filter_hold_nis)
-        self.options = replace(options or FusionOptions(), confirm_gaps=False,
+        # (no options: 1 ms, or less for cameras faster than 333 fps, as pslog fuse's)
+        self.options = replace(options or FusionOptions(tolerance_s=default_tolerance(rig)),
+                               confirm_gaps=False,
                                confirm_every=False, confirm_sides=False,
                                confirm_breaks=False,
                                filter_hold_nis=None)

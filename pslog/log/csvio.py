@@ -275,9 +275,11 @@ def read_detections_csv(path, rig: Rig, camera: str | None = None,
     camera (or, with ``camera``, a row naming another).
     """
     path = Path(path)
-    if camera is not None and camera not in rig.names:
+    if camera is not None and rig.spelling(camera) is None:
         raise InputError(f"--detections {camera}={path}: unknown camera {camera!r} (rig has "
                          f"{', '.join(rig.names)})")
+    if camera is not None:
+        camera = rig.spelling(camera)  # (the rig's own Unicode spelling of it)
     required = _REQUIRED if camera is None else _REQUIRED[1:]
     expected, optional = (("camera,time,u,v", "frame,score") if camera is None
                           else ("time,u,v", "frame,score,camera"))
@@ -379,6 +381,8 @@ def read_detections_csv(path, rig: Rig, camera: str | None = None,
         has_frame, has_score = "frame" in col, "score" in col
         for line, row in csv_rows(reader, len(header), path):
             name = row[col["camera"]].strip() if "camera" in col else str(camera)
+            if name not in index:  # another Unicode spelling of a rig's name, or None
+                name = rig.spelling(name) or name
             if camera is not None and name != camera:
                 raise InputError(f"{path}: line {line}: camera {name!r}, but the file "
                                  f"was given as camera {camera}'s (--detections "
