@@ -455,7 +455,8 @@ def static_camera(times, table, points, uv, finite, paired, dz, lags, long_lags,
     static_s, ns); ``focal_static``: min(f_x, f_y) static_m (_still_px); ``center`` (3,)
     the camera's; ``long_t``: long_lags / fps; ``long_c``: LONG_STILL_C; ``g``: gravity.
     Sets ``lone`` (gating._static's third value) too: the image test counted with each
-    candidate's own tolerance, whatever supports it."""
+    candidate's own tolerance, whatever supports it (without a point: the tolerance of a
+    point known at its pixel, gating._borrowed_tolerance; then the long test's verdict too)."""
     n_f, k_max = table.shape[0], table.shape[1]
     top = min(long_lags, n_f - 1)
     for f in range(n_f):

@@ -678,7 +678,9 @@ def _static(c: _Candidates, tables, rig: Rig, options: GatingOptions,
     lone : (C,) float, pixels: where the image test's verdict (:func:`_still_alone`) holds
         for a candidate whatever supports it (its pixel within its own ``f static_m / D``
         of one in every one of the ``static_s`` frames, its support not continuous), that
-        tolerance; NaN elsewhere (without a point too). Such a candidate is kept only
+        tolerance; NaN elsewhere. A candidate without a point takes the tolerance of a point
+        known at its pixel (:func:`_borrowed_tolerance`), and either image test's verdict
+        (:func:`_still_alone`, :func:`_still_long`) makes it lone. Such a candidate is kept only
         where its camera's own previous frame chose a candidate within it
         (:meth:`_Decider.decide`: a ball arriving at a static object's pixel)
 
