@@ -140,7 +140,7 @@ def test_every_argument_has_help_a_stated_default_and_a_chosen_metavar():
 
 def test_help_renders_stated_defaults_as_values():
     result = run("fuse", "--help")
-    assert "(default 1.0)" in " ".join(result.stdout.split())
+    assert "(default 0.5)" in " ".join(result.stdout.split())  # (--noise-px's %(default)s)
     assert "SESSION.mcap" in result.stdout and "-o FUSED.mcap" in result.stdout
     assert "%(default)" not in result.stdout
 

@@ -71,10 +71,11 @@ def test_record_with_force_keeps_the_old_session_when_no_camera_delivers(tmp_pat
     code, _, err = cli("simulate", "--rig", "paper2", "-o", old)
     assert code == 0, err
     before = old.read_bytes()
-    bad = tmp_path / "not_a_video.mp4"
+    bad, bad2 = tmp_path / "not_a_video.mp4", tmp_path / "not_a_video_either.mp4"
     bad.write_bytes(b"no video here")
+    bad2.write_bytes(b"no video here")  # (one file for two cameras is refused: exit 2)
     code, _, err = cli("record", "--rig", "paper2", "--source", f"cam1={bad}",
-                       "--source", f"cam2={bad}", "-o", old, "--force", "--duration", "1")
+                       "--source", f"cam2={bad2}", "-o", old, "--force", "--duration", "1")
     assert code == 1
     assert old.read_bytes() == before
     assert not (tmp_path / "keep.mcap.partial").exists()
