@@ -13,11 +13,10 @@ from __future__ import annotations
 
 import shutil
 
-import cv2
-import numpy as np
 import pytest
 
 from .promises import assert_one_line_error, run_pslog
+from .test_sweep36 import _clip  # (an MJPEG clip of an orange ball crossing a green field)
 
 _ROWS = "cam1,1780000000.000000,320.5,240.25,0,0.9\ncam2,1780000000.011100,300.0,200.0,0,0.8\n"
 
@@ -34,16 +33,6 @@ def test_import_of_a_detectors_own_header_names_columns(tmp_path, header, hint):
     run = run_pslog("import", "--rig", "paper3", "--detections", path, "-o", out)
     assert_one_line_error(run, 1, contains=("bad header", hint))
     assert not out.exists() and not list(tmp_path.glob("lab.mcap*"))
-
-
-def _clip(path) -> None:
-    """A 0.5 s 640x480 clip at 30 fps: an orange ball on green."""
-    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 30.0, (640, 480))
-    for k in range(15):
-        image = np.full((480, 640, 3), (40, 110, 45), np.uint8)
-        cv2.circle(image, (200 + 10 * k, 240), 8, (20, 110, 245), -1)
-        writer.write(image)
-    writer.release()
 
 
 @pytest.mark.parametrize("command", ["record", "live"])
