@@ -120,19 +120,26 @@ def draw_ball(img: np.ndarray, uv: np.ndarray, r_px: float) -> None:
                cv2.LINE_AA, shift=4)
 
 
+def capture(cam: dict, k: int, ts, ps) -> tuple[float, float, np.ndarray]:
+    """Frame ``k`` of ``cam``: its logged time, the ball's true capture time (the camera's
+    clock offset and drift, and on a rolling shutter the ball's row: iterated) and the
+    ball's pixel there."""
+    logged = k / FPS + cam["phase"]
+    base = logged + cam["off"] + cam["drift"] * 1e-6 * logged
+    tt = base
+    for _ in range(3):
+        uv = project(cam, ball_at(ts, ps, np.array([tt]))[0])[0]
+        tt = base + cam["readout"] * uv[1] / cam["h"]
+    return logged, tt, uv
+
+
 def render_video(cam: dict, ts, ps, duration: float, path: Path, fourcc: str,
                  rng: np.random.Generator) -> int:
     bg = background(cam, rng)
     vw = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*fourcc), FPS, (cam["w"], cam["h"]))
     n = int(duration * FPS)
     for k in range(n):
-        logged = k / FPS + cam["phase"]
-        base = logged + cam["off"] + cam["drift"] * 1e-6 * logged
-        # the ball's row decides its capture time on a rolling shutter: iterate
-        tt = base
-        for _ in range(3):
-            uv = project(cam, ball_at(ts, ps, np.array([tt]))[0])[0]
-            tt = base + cam["readout"] * uv[1] / cam["h"]
+        _, tt, uv = capture(cam, k, ts, ps)
         x = ball_at(ts, ps, np.array([tt]))[0]
         depth = (cam["R"] @ x + cam["t"])[2]
         img = bg.copy()
@@ -208,12 +215,7 @@ def detector_csv(cams: list[dict], ts, ps, duration: float, path: Path,
     rows = []
     for c in cams:
         for k in range(int(duration * FPS)):
-            logged = k / FPS + c["phase"]
-            base = logged + c["off"] + c["drift"] * 1e-6 * logged
-            tt = base
-            for _ in range(3):
-                uv = project(c, ball_at(ts, ps, np.array([tt]))[0])[0]
-                tt = base + c["readout"] * uv[1] / c["h"]
+            logged, _, uv = capture(c, k, ts, ps)
             if rng.random() < 0.04:
                 continue
             uv = uv + rng.normal(0, 0.4, 2)
