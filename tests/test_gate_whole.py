@@ -47,19 +47,24 @@ def session(seed: int, rig: Rig, duration: float = 3.0, dirty: bool = True, rest
     return det, true_rig(rig, options)
 
 
-def decided(det, rig, whole: bool, causal: bool, wait_ns: int = 0, max_gap_s=None):
-    """``gating._decided``'s reason codes and ratios, by the way ``whole`` names."""
+def decided(det, rig, whole: bool, causal: bool, wait_ns: int = 0, max_gap_s=None,
+            compiled: bool = True):
+    """``gating._decided``'s reason codes and ratios, by the way ``whole`` names;
+    ``compiled`` False: no compiled kernel at all (the Python decider, its stillness by the
+    numpy test, ``gating._kernels`` answering no)."""
     assert gating._kernels(1)  # (else neither way is the compiled one)
     c, tables = gating.gate_common(det, rig)
     reason = np.full(len(c.camera), -1, dtype=np.int8)
-    old = gating.WHOLE_COMPILED
+    old, kernels = gating.WHOLE_COMPILED, gating._kernels
     gating.WHOLE_COMPILED = whole
+    if not compiled:
+        gating._kernels = lambda n, wait=False: False
     try:
         ratio = gating._decided(c, rig, gating.GatingOptions(), causal, wait_ns,
                                 round((max_gap_s or default_max_gap_s(rig)) * 1e9), reason,
                                 tables)
     finally:
-        gating.WHOLE_COMPILED = old
+        gating.WHOLE_COMPILED, gating._kernels = old, kernels
     return reason, ratio
 
 

@@ -20,12 +20,12 @@ import numpy as np
 import pytest
 from _rally import rally
 from numpy.testing import assert_array_equal
+from test_gate_whole import decided
 from test_stream_gating import assert_same_track, push_frames
 
 import pslog.fusion._gate_kernel  # noqa: F401  (loaded: the gate's compiled forms)
 from pslog.evaluation import errors_m
 from pslog.fusion import fuse, gating
-from pslog.fusion._prepare import default_max_gap_s
 from pslog.fusion.gating import StreamGate
 from pslog.fusion.stream import StreamFuser
 from pslog.motion import Motion
@@ -62,29 +62,12 @@ def test_smooth_makes_no_point_on_the_object_while_one_camera_sees_the_ball(sess
     assert not np.any(gated.chosen & object_rows & late)
 
 
-def _decided(det, whole: bool, causal: bool, monkeypatch, compiled: bool = True, rig=RIG):
-    """``gating._decided``'s reason codes and ratios: the whole-session kernels (``whole``)
-    or the Python decider, its stillness by the compiled batch test or (``compiled``
-    False) the numpy one."""
-    if not compiled:
-        monkeypatch.setattr(gating, "_kernels", lambda n, wait=False: False)
-    else:
-        assert gating._kernels(1)
-    monkeypatch.setattr(gating, "WHOLE_COMPILED", whole)
-    c, tables = gating.gate_common(det, rig)
-    reason = np.full(len(c.camera), -1, dtype=np.int8)
-    ratio = gating._decided(c, rig, gating.GatingOptions(), causal, 0,
-                            round(default_max_gap_s(rig) * 1e9), reason, tables)
-    monkeypatch.undo()
-    return reason, ratio
-
-
 @pytest.mark.parametrize("causal", [False, True], ids=["offline", "causal"])
-def test_the_gates_forms_decide_alike(session, causal, monkeypatch):
+def test_the_gates_forms_decide_alike(session, causal):
     det = session[0]
-    reason, ratio = _decided(det, whole=False, causal=causal, monkeypatch=monkeypatch)
+    reason, ratio = decided(det, RIG, False, causal)
     for whole, compiled in ((True, True), (False, False)):
-        other, other_ratio = _decided(det, whole, causal, monkeypatch, compiled)
+        other, other_ratio = decided(det, RIG, whole, causal, compiled=compiled)
         assert_array_equal(other, reason)
         assert_array_equal(other_ratio, ratio)
 
@@ -153,11 +136,10 @@ def test_the_forms_decide_alike_where_many_candidates_borrow(make, seed, monkeyp
         return out
 
     borrowed_tolerance = gating._borrowed_tolerance
-    forms = []
-    for whole, compiled in ((False, True), (True, True), (False, False)):
-        for causal in (False, True):
-            monkeypatch.setattr(gating, "_borrowed_tolerance", counted)
-            forms.append(_decided(det, whole, causal, monkeypatch, compiled, rig))
+    monkeypatch.setattr(gating, "_borrowed_tolerance", counted)
+    forms = [decided(det, rig, whole, causal, compiled=compiled)
+             for whole, compiled in ((False, True), (True, True), (False, False))
+             for causal in (False, True)]
     assert sum(borrowed) >= 20, borrowed
     for i, (reason, ratio) in enumerate(forms[2:], start=2):
         assert_array_equal(reason, forms[i % 2][0], err_msg=f"form {i}")
