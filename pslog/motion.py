@@ -36,6 +36,9 @@ from .errors import InputError
 
 G = 9.8  # m/s², as in the paper
 BALL_RADIUS = 0.0215  # m, a golf ball (RoboCup small-size league)
+#: The fastest ball the gate and the filter's (re)starts believe in, m/s
+#: (``GatingOptions.max_speed_m_s``, ``FilterOptions.max_speed_m_s``)
+MAX_BALL_SPEED_M_S = 15.0
 
 
 @dataclass(frozen=True)

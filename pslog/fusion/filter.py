@@ -133,7 +133,7 @@ import numpy as np
 
 from .._jit import kernel
 from ..errors import FusionError
-from ..motion import BALL_RADIUS, Ball, G
+from ..motion import BALL_RADIUS, MAX_BALL_SPEED_M_S, Ball, G
 from ..records import NS, Observations, Track
 from ..rig import Rig
 from . import FILTER_HOLD_NIS
@@ -277,6 +277,11 @@ class FilterOptions:
         are mixed by an interacting multiple model (0: the ballistic model alone)
     max_init_speed_std : float, a (re)initialisation whose velocity standard deviation
         ``sqrt(trace P_vv)`` exceeds this is refused, m/s
+    max_speed_m_s : float or None, a (re)initialisation whose speed exceeds this by more
+        than three standard deviations (along its velocity) is refused like a fit that
+        fails (the window loses its oldest detection): no ball is that fast, and a
+        spurious blob on a lone camera's epipolar line makes such paths (session 43); the
+        gate's bound (``GatingOptions.max_speed_m_s``) by default; None: no bound, m/s
     confirm_nis : float, an accepted update whose NIS exceeds this (99 % quantile of χ²₂)
         must be confirmed like a jump
     max_std_m : float or None, a point whose ``std_m`` exceeds this is withheld, metres
@@ -398,6 +403,7 @@ class FilterOptions:
     init_span_s: float = 0.03
     max_init_std_m: float = 0.05
     max_init_speed_std: float = 1.0
+    max_speed_m_s: float | None = MAX_BALL_SPEED_M_S
     confirm_nis: float = 9.21
     withhold: bool = True
     max_gap_s: float | None = None
@@ -452,6 +458,10 @@ class FilterOptions:
                 raise FusionError(f"filter {name} must be finite and >= 0, got {value!r}")
         if not (math.isfinite(self.adapt_rate) and 0.0 <= self.adapt_rate < 1.0):
             raise FusionError(f"filter adapt_rate must be in [0, 1), got {self.adapt_rate!r}")
+        if self.max_speed_m_s is not None and not (math.isfinite(self.max_speed_m_s)
+                                                   and self.max_speed_m_s > 0):
+            raise FusionError(f"filter max_speed_m_s must be finite and > 0 or None, got "
+                              f"{self.max_speed_m_s!r}")
         if self.turn_on_psd is not None and not (math.isfinite(self.turn_on_psd)
                                                  and self.turn_on_psd > 0):
             raise FusionError(f"filter turn_on_psd must be finite and > 0, got "
@@ -3112,7 +3122,7 @@ class BallFilter:
                     self._I[_ICAP] = min(max(int(self._I[_ICAP]), len(window) + 1),
                                          self.options.init_max_window)
                 break
-            elif fit is not None:
+            elif fit is not None and not self._too_fast(fit[0], fit[1]):
                 x, P, residuals = fit
                 # the noise estimate starts again at each (re)start, from its prior (or the
                 # estimate, if larger) and the window's residuals: a lost track may mean
@@ -3157,6 +3167,22 @@ class BallFilter:
             del window[0]
         self._set_window(window)
         return False
+
+    def _too_fast(self, x, P) -> bool:
+        """Whether a start's fit is faster than any ball: its speed ``|v̂|`` exceeds
+        ``max_speed_m_s`` by more than three standard deviations of the speed, ``σ² =
+        v̂ᵀ P_vv v̂ / |v̂|²`` (the speed's variance to first order). ``x`` (6,) position and
+        velocity, ``P`` (36,) their covariance, row-major."""
+        bound = self.options.max_speed_m_s
+        if bound is None:
+            return False
+        v = np.asarray(x[3:6], dtype=np.float64)
+        speed2 = float(v @ v)
+        if speed2 <= bound * bound:
+            return False
+        Pvv = np.asarray(P, dtype=np.float64).reshape(6, 6)[3:, 3:]
+        sigma = math.sqrt(max(float(v @ Pvv @ v) / speed2, 0.0))
+        return math.sqrt(speed2) - bound > 3.0 * sigma
 
     def _window_jump_var(self, window) -> tuple[float, float, float]:
         """The variances (x, y, z) a start's point gains from the velocity jumps (kicks,

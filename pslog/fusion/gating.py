@@ -76,7 +76,7 @@ import numpy as np
 
 from ..errors import FusionError, InputError
 from ..geometry import epipolar_lines, fundamental_matrices
-from ..motion import G
+from ..motion import MAX_BALL_SPEED_M_S, G
 from ..records import NS, Detections, Observations
 from ..rig import Rig
 from ..timing import MAX_READOUT_TERM_NS, camera_parameters, true_times_ns
@@ -143,7 +143,7 @@ class GatingOptions:
     track_jump_m_s: float = 6.0
     track_window_s: float = 0.12
     track_points: int = 6
-    max_speed_m_s: float = 15.0
+    max_speed_m_s: float = MAX_BALL_SPEED_M_S
     loose_ratio: float = 2.0
     static_s: float = 0.25
     static_m: float = 0.05
