@@ -72,8 +72,10 @@ equations, exactly as implemented, are in ``docs/methods.md`` (section ``filter`
   ``init_detections`` of two cameras or more, within ``max_gap_s`` of each other): a
   least-squares fit per model (ballistic, supported: to their viewing rays, refined by
   Gauss-Newton in distorted pixels; the coordinated turn by Gauss-Newton in pixels under its
-  turn rate's prior), accepted when every detection reprojects inside the gate; each model
-  starts at its own fit, its probability from the fits' likelihoods (``start_models``).
+  turn rate's prior), accepted when every detection reprojects inside the gate and the path
+  is no faster than a ball (``max_speed_m_s``, the gate's bound, to three standard
+  deviations); each model starts at its own fit, its probability from the fits'
+  likelihoods (``start_models``).
   A window too short in time to pin the velocity (``init_window`` detections at 60 fps and
   above) grows by the next detections until its fit passes (``init_span_s``).
 
