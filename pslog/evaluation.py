@@ -473,6 +473,9 @@ LEFT_OUT_TEXT = {
              "sees too: a static object or the ball at rest; docs/methods.md, \"A choice in "
              "doubt\", \"An unmoved choice at the start\")",
     "underdetermined_end": "smooth: an end beyond a kick that too few detections hold",
+    "contradicted_run": "smooth: consecutive detections of two or more cameras that the fit "
+                        "rejected: the ball was where the fit is not there (a kick or bounce "
+                        "it did not find)",
 }
 
 #: Why ``pslog eval`` could not score a point a method wrote (:func:`unscored_counts`'s

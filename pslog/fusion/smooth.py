@@ -20,6 +20,10 @@ pieces (never inside a gap the model does not bridge). Per-point quality:
   rejected is its prediction; the detection's camera did not see the ball there (a spurious
   blob kept where the ball was out of its view: docs/methods.md, "``smooth``'s rejected
   detections");
+- withheld where the fit is contradicted (``Track.dropped["contradicted_run"]``): a run of
+  consecutive detections the fit rejected, from two cameras or more, is the ball where the
+  fit is not (a kick it missed); no point between the fitted detections around the run
+  (:func:`contradicted_spans`);
 - ``gap_s``: the largest time gap bridged: the longest interval between consecutive fitted
   detections (any camera; not those the fit rejected) that touches the point (at a
   detection, the longer of the intervals before and after it; on a grid point and at a
@@ -59,11 +63,17 @@ def fuse_smooth(prep: Prepared, rig: Rig, options) -> Track:
     if fit is None:
         return _empty()
     rejected_all = fit.rejected  # (n,) the detections the fit rejected (Fit.rejected)
+    spans = contradicted_spans(obs.time_ns, obs.camera, fit.used, rejected_all)
+    n_contradicted = 0
     if options.rate_hz is None:
         # the points with a finite position, gathered once (the covariances of a 90-minute
         # session are 35 MB: gathered and then filtered, they were copied twice); none
         # gathered when every observation has one (the fit's arrays are the track's)
         keep = fit.used & np.all(np.isfinite(fit.position), axis=1)
+        if len(spans):
+            inside = _inside_spans(obs.time_ns, spans)
+            n_contradicted = int(np.count_nonzero(keep & inside))
+            keep &= ~inside
         rejected = rejected_all
         if np.all(keep):
             time_ns, camera = obs.time_ns, obs.camera
@@ -84,6 +94,10 @@ def fuse_smooth(prep: Prepared, rig: Rig, options) -> Track:
         closer = np.abs(obs.time_ns[before] - time_ns) < np.abs(obs.time_ns[near] - time_ns)
         camera = obs.camera[np.where(closer, before, near)]
         keep = np.all(np.isfinite(position), axis=1)
+        if len(spans):
+            inside = _inside_spans(time_ns, spans)
+            n_contradicted = int(np.count_nonzero(keep & inside))
+            keep &= ~inside
         time_ns, camera, position = time_ns[keep], camera[keep], position[keep]
         cov, residual = cov[keep], residual[keep]
         flag = np.full(len(time_ns), np.nan)  # a grid point is no detection
@@ -101,7 +115,57 @@ def fuse_smooth(prep: Prepared, rig: Rig, options) -> Track:
     dropped = {"underdetermined_end": fit.withheld} if fit.withheld else {}
     if n_doubt:
         dropped["doubt"] = n_doubt
+    if n_contradicted:
+        dropped["contradicted_run"] = n_contradicted
     return Track("smooth", time_ns, position, camera, quality, dropped=dropped)
+
+
+def contradicted_spans(time_ns: np.ndarray, camera: np.ndarray, used: np.ndarray,
+                       rejected: np.ndarray) -> np.ndarray:
+    """(k, 2) int64 ns, open intervals ``(a, b)`` where the fit is contradicted: each holds a
+    run of consecutive fitted detections (time order) that the fit rejected, from two cameras
+    or more, ``a`` the fitted detection before the run that it did not reject (the run's
+    first time when none), ``b`` the one after (the run's last when none); a neighbour at a
+    run's own time falls inside it.
+
+    Why (session 43): the fit rejects a detection of the ball it models with probability
+    1e-4 (:attr:`~pslog.estimation.Fit.rejected`); a spurious blob the gate let in is one
+    camera's, once. Two cameras' consecutive detections that the fit rejects, each the gate
+    found consistent with the others' rays, are the ball where the fit is not: a kick or
+    bounce the break search missed (near a piece's start, or where misses and a blind
+    camera leave few detections around it), with the fit bending through it on the motion
+    of one side. Its points there were 30-740 mm off at a ``std_m`` of 4-9 mm (held-out
+    ``bench_dirty.py --more`` runs, docs/methods.md "A run of rejected detections").
+
+    time_ns : (n,) int64, sorted; camera : (n,) int; used, rejected : (n,) bool (Fit's)
+    """
+    rows = np.flatnonzero(used)
+    if len(rows) == 0:
+        return np.zeros((0, 2), np.int64)
+    flag = np.asarray(rejected, bool)[rows]
+    if not flag.any():
+        return np.zeros((0, 2), np.int64)
+    edges = np.diff(np.r_[0, flag.astype(np.int8), 0])
+    starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)  # [start, end)
+    t, cam = time_ns[rows], np.asarray(camera)[rows]
+    out = []
+    for a, b in zip(starts.tolist(), ends.tolist(), strict=True):
+        if len(np.unique(cam[a:b])) < 2:
+            continue
+        # (a neighbour at the run's own time, synchronised shutters: the span holds it too)
+        lo = min(t[a - 1], t[a] - 1) if a > 0 else t[a] - 1
+        hi = max(t[b], t[b - 1] + 1) if b < len(t) else t[b - 1] + 1
+        out.append((lo, hi))
+    return np.array(out, np.int64).reshape(-1, 2)
+
+
+def _inside_spans(time_ns: np.ndarray, spans: np.ndarray) -> np.ndarray:
+    """(n,) bool: the times strictly inside one of the open intervals ``spans`` (k, 2),
+    sorted and disjoint."""
+    j = np.searchsorted(spans[:, 0], time_ns, side="left") - 1  # the span starting before
+    ok = j >= 0
+    jj = np.maximum(j, 0)
+    return ok & (time_ns > spans[jj, 0]) & (time_ns < spans[jj, 1])
 
 
 def session_fit(prep: Prepared, rig: Rig, options):
