@@ -139,8 +139,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--readout", type=_camera_value("ms", 1e-3, all_cameras=True),
                         action="append", default=[], metavar="[CAM=]MS",
                         help="fault: rolling shutters reading top to bottom row in MS "
-                             "milliseconds (below a frame period); MS alone: every camera; "
-                             "repeatable")
+                             "milliseconds (below a frame period); MS alone: every camera "
+                             "but those given as CAM=MS; repeatable, each camera once")
     parser.add_argument("--host-jitter", type=nonnegative_float, default=0.0, metavar="MS",
                         help="fault: standard deviation of the logged stamps around the "
                              "shutter times, milliseconds (host arrival jitter; frame "
@@ -197,17 +197,20 @@ def run(args: argparse.Namespace) -> int:
         rig = apply_timing(rig, args.timing)
     timing = timing_label(rig)  # the label always says what the offsets are
     motion = get_motion(args.motion)
-    readout = {}
-    for name, value in args.readout:  # in order: a later value wins
-        readout.update({n: value for n in rig.names} if name is None else {name: value})
-    for option, pairs in (("--clock-offset", args.clock_offset), ("--drift", args.drift)):
+    for option, pairs in (("--clock-offset", args.clock_offset), ("--drift", args.drift),
+                          ("--readout", args.readout)):
         names = [name for name, _ in pairs]
-        twice = next((n for i, n in enumerate(names) if n in names[:i]), None)
-        if twice is not None:  # (the last one silently won)
-            given = ", ".join(f"{v * 1e3 if option == '--clock-offset' else v:g}"
+        twice = next((n for i, n in enumerate(names) if n in names[:i]), False)
+        if twice is not False:  # (the last one silently won; --readout 5 --readout 8 too)
+            given = ", ".join(f"{v if option == '--drift' else v * 1e3:g}"
                               for n, v in pairs if n == twice)
-            return usage_error("simulate", f"argument {option}: camera {twice} given "
-                                           f"twice ({given}): give each camera once")
+            what = (f"camera {twice}" if twice is not None
+                    else "a readout for every camera (MS alone)")
+            return usage_error("simulate", f"argument {option}: {what} given twice "
+                                           f"({given}): give each camera once")
+    # MS alone for every camera, CAM=MS for one of them, in any order
+    readout = {n: value for name, value in args.readout if name is None for n in rig.names}
+    readout.update({name: value for name, value in args.readout if name is not None})
     faults: dict[str, dict] = {"clock_offset_s": dict(args.clock_offset),
                                "clock_drift_ppm": dict(args.drift), "readout_s": readout}
     options = SimulationOptions(noise_px=args.noise_px, jitter_s=args.jitter_ms / 1e3,

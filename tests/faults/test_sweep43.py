@@ -1,0 +1,42 @@
+"""Session 43's items left by walk42 and hostile42, the faults a user makes: through the real
+CLI, each case asserting the promises (one line naming the value, the exit code, nothing
+written).
+
+``simulate --readout cam2=5 --readout cam2=8`` simulated 8 ms, silently (``--clock-offset``,
+``--drift`` and ``rig import --offset`` refuse a camera given twice); ``--readout cam2=5
+--readout 8`` gave cam2 8 ms, and in the other order 5: now each camera once, a camera's own
+value over MS alone in any order.
+"""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from pslog.log import read_session
+
+from .promises import assert_refused, run_pslog
+
+
+@pytest.mark.parametrize(("given", "said"), [
+    (("cam2=5", "cam2=8"), "camera cam2 given twice (5, 8)"),
+    (("cam2=5", "cam2=5"), "camera cam2 given twice (5, 5)"),
+    (("5", "cam3=2", "8"), "a readout for every camera (MS alone) given twice (5, 8)"),
+])
+def test_simulate_refuses_a_readout_given_twice(tmp_path, given, said):
+    args = [a for g in given for a in ("--readout", g)]
+    assert_refused(tmp_path, 2, ["simulate", "--rig", "paper3", "--duration", "0.3", *args,
+                                 "-o", "s.mcap"], contains=("argument --readout: " + said))
+
+
+@pytest.mark.parametrize("order", [("cam2=5", "8"), ("8", "cam2=5")])
+def test_a_cameras_readout_wins_over_every_cameras_in_any_order(tmp_path, order):
+    out = tmp_path / "s.mcap"
+    args = [a for g in order for a in ("--readout", g)]
+    run = run_pslog("simulate", "--rig", "paper3", "--duration", "0.3", "--seed", "75010",
+                    *args, "-o", out)
+    assert run.code == 0, run.stderr
+    clock = json.loads(read_session(out).metadata["truth_clock"])["cameras"]
+    assert {n: c["readout"] for n, c in clock.items()} == {"cam1": 0.008, "cam2": 0.005,
+                                                           "cam3": 0.008}
