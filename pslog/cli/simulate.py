@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import re
 
 import numpy as np
 
@@ -151,10 +150,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--spurious-radius", type=_spurious_radius, default=0.0, metavar="PX",
                         help="where the false candidates are: 0, anywhere in the image; else "
                              "within PX pixels of the ball, at most 100 (default %(default)s)")
-    # '--distractor -2,1,0' (a negative X) is a value, not an option: argparse < 3.13 reads
-    # only '-2' or '-2.5' as negative numbers and said "expected one argument"; 3.13's rule
-    # (a '-' then a digit) is taken over here (this parser has no option like '-1')
-    parser._negative_number_matcher = re.compile(r"^-\.?\d")
+    # ('--distractor -2,1,0', a negative X, is a value: pslog.cli._Parser)
     parser.add_argument("--distractor", type=_distractor, action="append", default=[],
                         metavar="[CAM=]X,Y,Z",
                         help="fault: a static second orange object at world point X,Y,Z "

@@ -5,7 +5,10 @@ written).
 ``simulate --readout cam2=5 --readout cam2=8`` simulated 8 ms, silently (``--clock-offset``,
 ``--drift`` and ``rig import --offset`` refuse a camera given twice); ``--readout cam2=5
 --readout 8`` gave cam2 8 ms, and in the other order 5: now each camera once, a camera's own
-value over MS alone in any order.
+value over MS alone in any order. ``--hsv -5,22,...`` (a negative hue, or any value of the
+box starting with ``-``) said "argument --hsv: expected one argument", not the value: a
+``-`` then a digit is now a value to every pslog command (Python 3.13's rule), and the box's
+range check names it.
 """
 
 from __future__ import annotations
@@ -40,3 +43,19 @@ def test_a_cameras_readout_wins_over_every_cameras_in_any_order(tmp_path, order)
     clock = json.loads(read_session(out).metadata["truth_clock"])["cameras"]
     assert {n: c["readout"] for n, c in clock.items()} == {"cam1": 0.008, "cam2": 0.005,
                                                            "cam3": 0.008}
+
+
+@pytest.mark.parametrize(("command", "box", "said"), [
+    ("record", "-5,22,120,255,70,255", "HSV hmin must be an integer in 0..179, got -5"),
+    ("live", "-5,22,120,255,70,255", "HSV hmin must be an integer in 0..179, got -5"),
+    ("redetect", "-1,22,120,255,70,255", "HSV hmin must be an integer in 0..179, got -1"),
+    ("record", "4,22,-120,255,70,255", "HSV smin must be an integer in 0..255, got -120"),
+    ("record", "4,180,120,255,70,255", "HSV hmax must be an integer in 0..179, got 180"),
+    ("record", "4,22,120,255,70,256", "HSV vmax must be an integer in 0..255, got 256"),
+])
+def test_an_hsv_box_out_of_range_is_named(tmp_path, command, box, said):
+    tail = {"record": ["--synthetic", "--rig", "paper3", "-o", "s.mcap"],
+            "live": ["--synthetic", "--rig", "paper3", "--duration", "1"],
+            "redetect": ["s.mcap", "-o", "r.mcap"]}[command]
+    assert_refused(tmp_path, 2, [command, *tail, "--hsv", box],
+                   contains=f"argument --hsv: {said}")
