@@ -43,7 +43,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "truth, in millimetres (needs c3d: pip install 'pslog[c3d]')")
     add_force(parser)
     declare_files(parser, inputs=("session",),
-                  outputs=("detections", "csv", "jsonl", "parquet", "c3d"))
+                  outputs=("detections", "csv", "jsonl", "parquet", "c3d"), folders=("tum",))
 
 
 #: each file option's format (a key of ``_common.FORMATS``: its suffixes)

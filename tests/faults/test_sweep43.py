@@ -59,3 +59,17 @@ def test_an_hsv_box_out_of_range_is_named(tmp_path, command, box, said):
             "redetect": ["s.mcap", "-o", "r.mcap"]}[command]
     assert_refused(tmp_path, 2, [command, *tail, "--hsv", box],
                    contains=f"argument --hsv: {said}")
+
+
+@pytest.mark.parametrize("order", ["csv first", "tum first"])
+def test_export_output_inside_a_tum_folder_not_made_yet(tmp_path, order):
+    """``export --csv tum/x.csv --tum tum`` with no folder ``tum``: "output folder does not
+    exist: tum" (the user named it to be made): now said, in either order, nothing written."""
+    run = run_pslog("simulate", "--rig", "paper2", "--duration", "0.3", "--seed", "75020",
+                    "-o", tmp_path / "s.mcap")
+    assert run.code == 0, run.stderr
+    pair = [["--csv", "tum/x.csv"], ["--tum", "tum"]]
+    args = [a for p in (pair if order == "csv first" else pair[::-1]) for a in p]
+    assert_refused(tmp_path, 1, ["export", "s.mcap", *args], contains=(
+        "output tum/x.csv: its folder tum does not exist; --tum tum makes it, but only its "
+        "own files"))
