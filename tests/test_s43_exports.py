@@ -1,12 +1,13 @@
 """Session 43: ``pslog export``'s outputs against each other (their order on the command line
-changes nothing, none replaces another) and C3D of times on no common grid; through the real
-CLI on real sessions."""
+changes nothing, none replaces another) and C3D of points of one time; through the real CLI
+on real sessions."""
 
 from __future__ import annotations
 
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 from _cli import pslog_ok
 
@@ -51,3 +52,28 @@ def test_export_outputs_in_the_tum_folder_in_any_order(fused, tmp_path):
         done = _export_in(tmp_path, fused, *args)
         assert done.returncode == 1 and "given as two outputs" in done.stderr
         assert not (tmp_path / "y.csv").exists()
+
+
+def _c3d_frames(path):
+    import warnings
+
+    c3d = pytest.importorskip("c3d")
+    with open(path, "rb") as f, warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)  # "No analog data found in file."
+        reader = c3d.Reader(f)
+        labels = [s.strip() for s in reader.point_labels]
+        frames = np.array([points for _, points, _ in reader.read_frames()])
+    return labels, frames
+
+
+def test_c3d_of_a_track_with_points_of_one_time(tmp_path):
+    """Cameras firing together (sync timing): the filter's points of one time made the grid's
+    median interval 0 and ``export --c3d`` a ZeroDivisionError traceback."""
+    session_path, fused = tmp_path / "s.mcap", tmp_path / "f.mcap"
+    pslog_ok("simulate", "--rig", "paper3", "--duration", "1", "--seed", "75061",
+             "-o", session_path)
+    pslog_ok("fuse", session_path, "--method", "filter", "-o", fused)
+    out = pslog_ok("export", fused, "--c3d", tmp_path / "t.c3d")
+    assert "at 30 Hz" in out and "filter" in out, out
+    labels, frames = _c3d_frames(tmp_path / "t.c3d")
+    assert labels[0] == "filter" and np.count_nonzero(frames[:, 0, 3] != -1) >= 25

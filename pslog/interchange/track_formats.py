@@ -271,7 +271,10 @@ def c3d_grid(session) -> tuple[float, int, int]:
         raise InputError(f"{session.path}: C3D needs a track of at least two points at "
                          f"different times to set its frame rate")
     interval, densest = min(spans, key=lambda s: s[0])
-    rates: list[float] = [NS / interval, NS / float(np.median(np.diff(densest.time_ns)))]
+    # (intervals > 0: points of one time, a filter's of cameras firing together, made the
+    # median 0 and the rate a ZeroDivisionError traceback)
+    steps = np.diff(densest.time_ns)
+    rates: list[float] = [NS / interval, NS / float(np.median(steps[steps > 0]))]
     fps = {cam.fps for cam in session.rig.cameras}
     if len(fps) == 1:  # the shutters' own rate: k shutter phases a frame period of the rig
         k = round(rates[0] / (frame_rate := fps.pop()))
