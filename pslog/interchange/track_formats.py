@@ -387,9 +387,14 @@ def write_c3d(session, path: str | Path, *, force: bool = False
     1000), the unit biomechanics tools expect; floating-point storage, so nothing is lost to
     a scale factor. A frame where a method has no point holds an invalid point (residual
     -1); the residual of a valid point is the method's ``ray_miss_m`` in mm when it has one,
-    else 0. Where two points of a method fall on one frame (irregular times: jittered host
-    stamps, dropped and re-sent frames) the nearer in time is kept and the other left out;
-    how many is returned, for the command to say.
+    else 0. A method whose points each have a frame of their own is written point by point,
+    each on its nearest frame. One of which two points would fall on one frame (irregular
+    times: rolling shutters, drifting clocks, jittered host stamps; the nearer was kept and
+    the other left out, 11-30 % of a rolling-shutter session's points) is resampled onto the
+    grid instead (:func:`_resample`): its position at each frame's time, linear between the
+    points either side, where they are at most :data:`C3D_BRIDGE_PERIODS` frame periods
+    apart (a longer gap stays empty, but for a lone point in it, on its nearest frame);
+    which methods, and their valid frames, are returned for the command to say.
 
     C3D numbers its frames with integers (``POINT:RATE`` and the header's first frame): the
     first frame's time is ``(first_frame - 1) / rate`` on the session clock only to within
@@ -398,7 +403,7 @@ def write_c3d(session, path: str | Path, *, force: bool = False
 
     Returns
     -------
-    (n_frames, rate_hz, {method: points left out, sharing a frame with a nearer one})
+    (n_frames, rate_hz, {method resampled: its valid frames})
     """
     c3d_check(session)
     import c3d
@@ -412,20 +417,23 @@ def write_c3d(session, path: str | Path, *, force: bool = False
     points = np.zeros((n_frames, len(labels), 5), dtype=np.float32)
     points[:, :, 3] = -1.0  # invalid until a point is put there
     frame_ns = first + np.round(np.arange(n_frames) * (NS / rate)).astype(np.int64)
-    merged: dict[str, int] = {}
+    resampled: dict[str, int] = {}
     for j, (method, track) in enumerate(tracks.items()):
         frames = np.clip(np.round((track.time_ns - first) * rate / NS).astype(np.int64), 0,
                          n_frames - 1)
-        miss = np.abs(track.time_ns - frame_ns[frames])
-        order = np.lexsort((miss, frames))  # per frame, the nearest point first
-        keep = order[np.r_[True, frames[order][1:] != frames[order][:-1]]] if len(
-            track) else order
-        merged[method] = len(track) - len(keep)
         residual = track.quality.get("ray_miss_m", np.zeros(len(track)))
         residual = np.where(np.isfinite(residual), residual * 1000.0, 0.0)
-        points[frames[keep], j, :3] = track.position_world[keep] * 1000.0
-        points[frames[keep], j, 3] = residual[keep]
-        points[frames[keep], j, 4] = 0.0
+        if len(np.unique(frames)) == len(track):  # a frame for each point: the points
+            points[frames, j, :3] = track.position_world * 1000.0
+            points[frames, j, 3] = residual
+            points[frames, j, 4] = 0.0
+            continue
+        valid, position, res = _resample(track.time_ns, track.position_world, residual,
+                                         frame_ns, C3D_BRIDGE_PERIODS * NS / rate)
+        points[valid, j, :3] = position * 1000.0
+        points[valid, j, 3] = res
+        points[valid, j, 4] = 0.0
+        resampled[method] = len(valid)
     if has_truth:
         at = session.truth.at(frame_ns)
         ok = np.all(np.isfinite(at), axis=1)
@@ -449,5 +457,60 @@ def write_c3d(session, path: str | Path, *, force: bool = False
         # tracker has: not a problem to show the user
         warnings.simplefilter("ignore", UserWarning)
         writer.write(f)
-    return n_frames, rate, merged
+    return n_frames, rate, resampled
+
+
+#: :func:`write_c3d` resamples a method's track at a frame's time between the points either
+#: side of it when they are at most this many frame periods apart (one point missed between
+#: them bridged; a longer gap stays empty, as the method left it)
+C3D_BRIDGE_PERIODS = 2.0
+
+
+def _resample(time_ns: np.ndarray, position: np.ndarray, residual: np.ndarray,
+              frame_ns: np.ndarray, bridge_ns: float
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A track at the frame times ``frame_ns`` (a uniform grid): ``(frames, positions,
+    residuals)`` of the frames inside it, each linear in time between the points either
+    side of its time (a point at the frame's time exactly: that point), where those are at
+    most ``bridge_ns`` apart; and a point with no frame so (its neighbours beyond the bridge
+    on both sides) on its nearest frame, so that every point is in the file. Points of one
+    time (cameras firing together) are first made one, their mean."""
+    order = np.argsort(time_ns, kind="stable")
+    t, inverse, count = np.unique(np.asarray(time_ns, np.int64)[order], return_inverse=True,
+                                  return_counts=True)
+    pos = np.zeros((len(t), 3))
+    np.add.at(pos, inverse, np.asarray(position, np.float64)[order])
+    pos /= count[:, None]
+    res = np.zeros(len(t))
+    np.add.at(res, inverse, np.asarray(residual, np.float64)[order])
+    res /= count
+    if len(t) == 0:
+        return np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0)
+    after = np.searchsorted(t, frame_ns, side="left")  # first point at or after the frame
+    exact = (after < len(t)) & (t[np.minimum(after, len(t) - 1)] == frame_ns)
+    inside = (after > 0) & (after < len(t))
+    a = np.clip(after - 1, 0, len(t) - 1)
+    b = np.clip(after, 0, len(t) - 1)
+    inside &= (t[b] - t[a]) <= bridge_ns
+    frames = np.flatnonzero(exact | inside)
+    a, b = a[frames], b[frames]
+    w = np.where(exact[frames], 1.0,
+                 (frame_ns[frames] - t[a]) / np.maximum(t[b] - t[a], 1).astype(np.float64))
+    out_pos = pos[a] + w[:, None] * (pos[b] - pos[a])
+    out_res = res[a] + w * (res[b] - res[a])
+    # a point with no neighbour within the bridge (a lone point between gaps) is on no
+    # frame yet: on its nearest frame, as it is (the nearest in time of such points there)
+    period = float(frame_ns[1] - frame_ns[0]) if len(frame_ns) > 1 else 1.0
+    near = np.clip(np.round((t - frame_ns[0]) / period).astype(np.int64), 0,
+                   len(frame_ns) - 1)
+    lone = np.flatnonzero(~np.isin(near, frames))
+    if len(lone):
+        lone = lone[np.lexsort((np.abs(t[lone] - frame_ns[near[lone]]), near[lone]))]
+        lone = lone[np.r_[True, near[lone][1:] != near[lone][:-1]]]
+        frames = np.concatenate([frames, near[lone]])
+        out_pos = np.concatenate([out_pos, pos[lone]])
+        out_res = np.concatenate([out_res, res[lone]])
+        order = np.argsort(frames)
+        frames, out_pos, out_res = frames[order], out_pos[order], out_res[order]
+    return frames, out_pos, out_res
 
