@@ -135,3 +135,60 @@ def test_c3d_of_a_track_with_points_of_one_time(tmp_path):
     assert "at 30 Hz" in out and "filter" in out, out
     labels, frames = _c3d_frames(tmp_path / "t.c3d")
     assert labels[0] == "filter" and np.count_nonzero(frames[:, 0, 3] != -1) >= 25
+
+
+def test_c3d_beyond_65535_frames_counts_them_in_its_parameters(tmp_path):
+    """A 90-minute session at 90 Hz: 486,000 frames, beyond the header's 16-bit frame numbers.
+    Refused before ("beyond the 65535 frames a C3D file holds"); now written as c3d.org
+    says: the header's last frame 65535, the count in POINT:LONG_FRAMES (float32) and
+    TRIAL:ACTUAL_START_FIELD / ACTUAL_END_FIELD (two 16-bit words each, low first), POINT:
+    FRAMES 65535. Read back from the bytes themselves, and every frame with c3d's reader."""
+    import struct
+    from decimal import Decimal
+
+    from pslog.interchange.track_formats import c3d_grid
+
+    burst, rig = tmp_path / "burst.mcap", tmp_path / "rig.toml"
+    pslog_ok("simulate", "--rig", "paper3", "--timing", "typeA", "--motion", "throw",
+             "--duration", "1", "--seed", "75071", "-o", burst)
+    rig.write_text(pslog_ok("rig", "show", burst))
+    pslog_ok("export", burst, "--detections", tmp_path / "d.csv")
+    lines = (tmp_path / "d.csv").read_text().splitlines()
+    late = []
+    for line in lines[1:]:  # the same throw 5399 s later: a session of 90 minutes
+        cells = line.split(",")
+        cells[1] = str(Decimal(cells[1]) + 5399)
+        cells[4] = str(int(cells[4]) + 5399 * 30)
+        late.append(",".join(cells))
+    (tmp_path / "long.csv").write_text("\n".join(lines + late) + "\n")
+    session, fused, path = tmp_path / "long.mcap", tmp_path / "f.mcap", tmp_path / "t.c3d"
+    pslog_ok("import", "--rig", rig, "--detections", tmp_path / "long.csv", "-o", session)
+    pslog_ok("fuse", session, "--method", "typeA", "-o", fused)
+    out = pslog_ok("export", fused, "--c3d", path)
+    tracks = read_session(fused)
+    rate, first, n = c3d_grid(tracks)
+    assert rate == 90.0 and n > 480_000 and f"wrote {path}: {n} frames at 90 Hz" in out
+    start = round(first * rate / 1e9) + 1
+    data = path.read_bytes()
+    words = struct.unpack("<256H", data[:512])
+    assert data[1] == 0x50 and words[1] == 1  # one point: typeA
+    assert (words[3], words[4]) == (start, 65535)  # first frame; the last saturated
+    assert struct.unpack("<f", data[20:24])[0] == 90.0
+    assert len(data) == -(-((words[8] - 1) * 512 + n * 16) // 512) * 512  # n frames, no more
+
+    labels, frames = _c3d_frames(path)
+    c3d = pytest.importorskip("c3d")
+    with open(path, "rb") as f:
+        reader = c3d.Reader(f)
+        assert reader.get("POINT:FRAMES").uint16_value == 65535
+        assert reader.get("POINT:LONG_FRAMES").float_value == n
+        lo, hi = reader.get("TRIAL:ACTUAL_END_FIELD").uint16_array
+        assert int(lo) + 65536 * int(hi) == start + n - 1
+        lo, hi = reader.get("TRIAL:ACTUAL_START_FIELD").uint16_array
+        assert int(lo) + 65536 * int(hi) == start
+    assert labels == ["typeA"] and len(frames) == n
+    track = tracks.tracks["typeA"]
+    at = np.round((track.time_ns - first) * rate / 1e9).astype(int)
+    assert at[-1] == n - 1  # the last point on the last frame, 90 minutes on
+    assert np.allclose(frames[at, 0, :3], track.position_world * 1000.0, atol=1e-3)
+    assert np.count_nonzero(frames[:, 0, 3] != -1) == len(track)

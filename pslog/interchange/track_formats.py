@@ -260,7 +260,8 @@ def c3d_grid(session) -> tuple[float, int, int]:
     left out 30 % of a track; 240 Hz holds every point within 0.1 ms of its frame): the
     lowest that leaves out as few points as any (within that share) and that the densest
     track keeps to (:func:`_coherence` at least :data:`C3D_COHERENT`: a jittered schedule
-    keeps to no finer grid, and stays on the first), within :data:`C3D_MAX_FRAMES` frames.
+    keeps to no finer grid, and stays on the first), within :data:`C3D_GRID_MAX_FRAMES`
+    frames.
     (Review41b: two 30 fps cameras 3 ms apart first hold their points apart on a grid they
     keep to at 10 x 30 Hz, beyond the 8 x tried before.)
     """
@@ -307,10 +308,10 @@ def c3d_grid(session) -> tuple[float, int, int]:
     # C3D's frames allow (review41b: two 30 fps cameras 3 ms apart, a tenth of the ball
     # missed, lost 41 % of the points on the median's 33 Hz: the first multiple holding
     # them apart that the points keep to, 300 Hz, is k = 10, beyond the 8 tried)
-    top = max(1.0, (C3D_MAX_FRAMES - 1) * NS / max(last - earliest, 1))
+    top = max(1.0, (C3D_GRID_MAX_FRAMES - 1) * NS / max(last - earliest, 1))
     trials = sorted({round(k * f, 6) for f in {cam.fps for cam in session.rig.cameras}
                      for k in range(1, min(C3D_MULTIPLES, int(top / f)) + 1)})
-    found = [(r, first, n) for r, first, n in map(grid, trials) if n <= C3D_MAX_FRAMES]
+    found = [(r, first, n) for r, first, n in map(grid, trials) if n <= C3D_GRID_MAX_FRAMES]
     lost = [left_out(r, first) for r, first, _n in found]
     least = min(lost, default=total)
     for (r, first, n), k in zip(found, lost, strict=True):
@@ -360,8 +361,16 @@ def _coherence(time_ns: np.ndarray, rate: float) -> float:
     return float(np.hypot(np.mean(np.cos(phase)), np.mean(np.sin(phase))))
 
 
-#: most frames a C3D file holds (its header's frame numbers are 16-bit in most readers)
-C3D_MAX_FRAMES = 65535
+#: most frames of a finer grid :func:`c3d_grid` tries: what the header's 16-bit frame numbers
+#: hold, which every reader reads (a finer grid is never the reason for a long file)
+C3D_GRID_MAX_FRAMES = 65535
+#: most frames a C3D file of pslog holds. Beyond 65535 the header's 16-bit first and last
+#: frame say 65535 and the count is in the parameters, as c3d.org's "Maintaining C3D frame
+#: count compatibility" has it (the ``c3d`` package writes them so): ``POINT:LONG_FRAMES``
+#: (a float32: whole numbers exact up to 2**24, hence this limit; 51.8 h at 90 Hz),
+#: ``POINT:FRAMES`` 65535 and ``TRIAL:ACTUAL_START_FIELD`` / ``ACTUAL_END_FIELD`` (each two
+#: 16-bit words, low first), which btk (Mokka) and the ``c3d`` reader take
+C3D_MAX_FRAMES = 2**24
 
 
 def c3d_check(session) -> None:
@@ -373,9 +382,11 @@ def c3d_check(session) -> None:
         raise InputError("--c3d needs the c3d package, which is not installed: pip install "
                          "'pslog[c3d]' (or pip install c3d)") from None
     rate, _first, n_frames = c3d_grid(session)
-    if n_frames > C3D_MAX_FRAMES:
+    if n_frames > C3D_MAX_FRAMES:  # (its frame count, a float32 parameter, inexact beyond)
         raise InputError(f"{session.path}: {n_frames} frames at {rate:g} Hz: beyond the "
-                         f"{C3D_MAX_FRAMES} frames a C3D file holds")
+                         f"{C3D_MAX_FRAMES} frames a C3D file counts exactly (its "
+                         f"POINT:LONG_FRAMES is a 32-bit float); export --csv, --jsonl or "
+                         f"--parquet, or cut the session")
 
 
 def write_c3d(session, path: str | Path, *, force: bool = False

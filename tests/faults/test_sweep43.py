@@ -73,3 +73,35 @@ def test_export_output_inside_a_tum_folder_not_made_yet(tmp_path, order):
     assert_refused(tmp_path, 1, ["export", "s.mcap", *args], contains=(
         "output tum/x.csv: its folder tum does not exist; --tum tum makes it, but only its "
         "own files"))
+
+
+def test_c3d_beyond_what_its_frame_count_holds_is_refused(tmp_path):
+    """Two throws 190,000 s apart (53 hours at 90 Hz: 17.1 million frames, beyond the 2**24 a
+    float32 POINT:LONG_FRAMES counts exactly): refused in one line naming the frames and the
+    formats that keep every point, nothing written (up to 2**24 a C3D is written, its count
+    in the parameters: tests/test_s43_exports.py)."""
+    from decimal import Decimal
+
+    burst = tmp_path / "burst.mcap"
+    for args in (["simulate", "--rig", "paper3", "--timing", "typeA", "--motion", "throw",
+                  "--duration", "1", "--seed", "75072", "-o", burst],
+                 ["export", burst, "--detections", tmp_path / "d.csv"]):
+        run = run_pslog(*args)
+        assert run.code == 0, run.stderr
+    (tmp_path / "rig.toml").write_text(run_pslog("rig", "show", burst).stdout)
+    lines = (tmp_path / "d.csv").read_text().splitlines()
+    late = []
+    for line in lines[1:]:
+        cells = line.split(",")
+        cells[1] = str(Decimal(cells[1]) + 190_000)
+        cells[4] = str(int(cells[4]) + 190_000 * 30)
+        late.append(",".join(cells))
+    (tmp_path / "long.csv").write_text("\n".join(lines + late) + "\n")
+    for args in (["import", "--rig", tmp_path / "rig.toml", "--detections",
+                  tmp_path / "long.csv", "-o", tmp_path / "s.mcap"],
+                 ["fuse", tmp_path / "s.mcap", "--method", "typeA", "-o", tmp_path / "f.mcap"]):
+        run = run_pslog(*args)
+        assert run.code == 0, run.stderr
+    assert_refused(tmp_path, 1, ["export", "f.mcap", "--c3d", "t.c3d"], contains=(
+        "frames at 90 Hz: beyond the 16777216 frames a C3D file counts exactly",
+        "export --csv, --jsonl or --parquet"))
