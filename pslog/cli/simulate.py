@@ -129,8 +129,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         default=[], metavar="CAM=MS",
                         help="fault: camera CAM's clock is off by MS milliseconds (true = "
                              "logged + offset; not the first camera, which defines the clock); "
-                             "repeatable. The session's rig keeps the nominal 0: 'pslog sync' "
-                             "recovers it")
+                             "repeatable. The session's rig keeps the rig's own value (0 for a rig "
+                             "without clock keys): 'pslog sync' recovers it")
     parser.add_argument("--drift", type=_camera_value("ppm", 1.0), action="append",
                         default=[], metavar="CAM=PPM",
                         help="fault: camera CAM's clock drifts by PPM parts per million (not "
@@ -174,7 +174,7 @@ def run(args: argparse.Namespace) -> int:
     from pslog.log import SessionWriter
     from pslog.motion import at_rest_first, get_motion
     from pslog.records import NS
-    from pslog.rig import Rig, apply_timing, resolve_rig, timing_label
+    from pslog.rig import apply_timing, resolve_rig, timing_label
     from pslog.simulation import (
         TRUTH_CLOCK_KEY,
         SimulationOptions,
@@ -254,15 +254,17 @@ def run(args: argparse.Namespace) -> int:
             return usage_error("simulate", f"argument --blackout: camera {name}'s blackout "
                                            f"starts at {start:g} s, not before the session "
                                            f"ends ({duration:g} s): it would hide nothing")
-    # the session's rig holds the nominal clock (zeros): the faults are for 'pslog sync'
-    # to find; their true values are kept in the metadata to score it
+    # the session's rig holds the nominal clock, the rig's own (zeros for a rig without
+    # clock keys): the faults are for 'pslog sync' to find; their true values are kept in
+    # the metadata to score it. (A rig file's own clock keys, a synced rig's, were zeroed
+    # too while the cameras were simulated with them: its fused tracks 14-25 mm off a
+    # readout of 25 ms, and nothing said; 'record --synthetic' keeps them)
     from pslog import progress
 
     clock = truth_clock(rig, options)
     progress.update(total=2, what=f"simulating {duration:.1f} s of {motion.name}")
     detections, truth, ball = simulate_labelled(rig, motion, duration, options)
-    nominal = Rig(tuple(c.replace(clock_offset=0.0, clock_drift_ppm=0.0, readout=0.0)
-                        for c in rig.cameras), rig.name)
+    nominal = rig
     detections, truth, n_early = drop_before_zero(detections, truth)
     ball, _, _ = drop_before_zero(ball, truth)
     settings = {"motion": motion.name, "duration_s": repr(float(duration)),
@@ -310,7 +312,8 @@ def run(args: argparse.Namespace) -> int:
           + (f" ({n_early} frame{'' if n_early == 1 else 's'} logged before t = 0 dropped)"
              if n_early else "")
           + (f"; clock faults ({', '.join(faulted)}) kept as {TRUTH_CLOCK_KEY!r} in the "
-             f"metadata, the rig holds the nominal clock: run 'pslog sync'" if faulted else ""))
+             f"metadata, the rig holds the nominal clock (its own): run 'pslog sync'"
+             if faulted else ""))
     return 0
 
 
