@@ -980,6 +980,10 @@ def _csv_value(value) -> str:
         return ""
     if isinstance(value, float):
         return "" if math.isnan(value) else repr(value)  # repr: exact round trip
+    if isinstance(value, str):  # a session, camera or error a spreadsheet would run: '=x
+        from pslog.log.csvio import csv_text
+
+        return csv_text(value)
     return str(value)
 
 
@@ -998,7 +1002,7 @@ def write_summary(rows: list[dict], outdir: str | Path) -> list[Path]:
         path = Path(outdir) / "summary.csv"
         with replacing(path, "w", force=True) as f:
             writer = csv.writer(f, lineterminator="\n")
-            writer.writerow(columns)
+            writer.writerow([_csv_value(c) for c in columns])  # (<camera>_offset_ms: -x_...)
             for row in rows:
                 writer.writerow([_csv_value(row.get(c)) for c in columns])
         written.append(path)
@@ -1020,9 +1024,15 @@ def write_summary(rows: list[dict], outdir: str | Path) -> list[Path]:
 
 
 def read_summary_csv(path: str | Path) -> list[dict[str, str]]:
-    """The rows of a ``summary.csv`` as strings (empty cells as ``""``)."""
+    """The rows of a ``summary.csv`` as strings (empty cells as ``""``; text a spreadsheet
+    would take for a formula as it was, without the ``'`` written before it)."""
+    from pslog.log.csvio import csv_text_read
+
+    def text(cell):
+        return csv_text_read(cell) if isinstance(cell, str) else cell
+
     with open(path, newline="", encoding="utf-8") as f:
-        return list(csv.DictReader(f))
+        return [{text(k): text(v) for k, v in row.items()} for row in csv.DictReader(f)]
 
 
 # --------------------------------------------------------------------------- the driver

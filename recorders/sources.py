@@ -14,9 +14,10 @@ Session clock: integer nanoseconds since the session start ``t0_ns``, a reading 
 - Video file: the container timestamp of each frame (``CAP_PROP_POS_MSEC`` after reading it;
   frame number / fps if the container has none) plus the source's start offset, so files
   recorded by separate cameras share one clock.
-- Synthetic: frame ``k`` of camera ``i`` is captured at ``offset_i + k / fps_i`` (the rig's
-  shutter schedule, as :func:`pslog.simulation.capture_times`); in real time the source waits
-  until the end of that frame's exposure on the session clock.
+- Synthetic: frame ``k`` of camera ``i`` is captured at ``offset_i + k / fps_i`` on the true
+  clock (the rig's shutter schedule, as :func:`pslog.simulation.capture_times`), stamped on
+  the camera's clock as the rig's clock model has it (:func:`synthetic_times`); in real time
+  the source waits until the end of that frame's exposure on the session clock.
 """
 
 from __future__ import annotations
@@ -263,9 +264,21 @@ class SyntheticSpec:
 
 
 def synthetic_times(camera: Camera, duration_s: float) -> np.ndarray:
-    """Capture times (k,) int64 ns of ``camera`` in ``[0, duration_s)``: its shutter times
-    (:func:`pslog.simulation.shutter_times`) on the nanosecond clock."""
-    return np.round(shutter_times(camera, duration_s) * NS).astype(np.int64)
+    """The stamps (k,) int64 ns on ``camera``'s own (logged) clock of its frames: its shutter
+    fires at ``offset + k / fps`` on the TRUE clock in ``[0, duration_s)`` (the rig's
+    ``offset`` is a phase on the true clock, docs/timing.md; :func:`shutter_times`), and its
+    clock stamps a frame's top row at the logged time the rig's clock model maps onto that
+    (:func:`pslog.timing.logged_times_ns`, as ``pslog simulate`` logs them): ``offset -
+    clock_offset + k / fps`` without drift. A frame stamped before 0 is not taken (as
+    simulate drops it). Without a clock correction: the shutter times themselves."""
+    true_ns = np.round(shutter_times(camera, duration_s) * NS).astype(np.int64)
+    if not camera.has_clock_correction:
+        return true_ns
+    from pslog.timing import logged_times_ns
+
+    logged = logged_times_ns(true_ns, 0.0, camera.height, camera.clock_offset,
+                             camera.clock_drift_ppm, camera.readout)
+    return logged[logged >= 0]
 
 
 class _SyntheticSource(FrameSource):

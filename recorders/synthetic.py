@@ -12,17 +12,19 @@ from pslog.errors import InputError
 from pslog.motion import BALL_RADIUS, Motion, get_motion
 from pslog.records import NS, Truth
 from pslog.rig import TIMING_PRESETS, Rig, apply_timing, timing_label
-from pslog.simulation import check_duration, check_exposure
+from pslog.simulation import check_duration, check_exposure, shutter_times
 
 from .detect import HsvRange
 from .record import RecordSummary, StopRequest, record
 from .render import RenderOptions
-from .sources import SyntheticSpec, synthetic_times
+from .sources import SyntheticSpec
 
 
 def synthetic_truth(rig: Rig, motion: Motion, duration_s: float) -> Truth:
-    """The ball centre at every capture time of every camera in ``[0, duration_s)``."""
-    times = np.unique(np.concatenate([synthetic_times(c, duration_s) for c in rig.cameras]))
+    """The ball centre at every shutter time of every camera in ``[0, duration_s)``, on the
+    true clock (the session's: the first camera's)."""
+    times = np.unique(np.concatenate([np.round(shutter_times(c, duration_s) * NS)
+                                      for c in rig.cameras]).astype(np.int64))
     return Truth(times, motion.position(times / NS))
 
 

@@ -172,10 +172,11 @@ def test_nothing_to_export_and_session_without_tracks(tmp_path, cli, sim_session
 
 
 @pytest.mark.filterwarnings("ignore:No analog data found")
-def test_c3d_says_how_many_points_irregular_times_put_on_a_shared_frame(tmp_path, cli):
-    """Jittered shutters (2 ms): some points of a method fall on one frame; the nearer is
-    kept and the command says how many were left out, per method; the file holds exactly the
-    others, and the exact time of its first frame."""
+def test_c3d_says_which_methods_irregular_times_resampled(tmp_path, cli):
+    """Jittered shutters (2 ms): some points of a method would fall on one frame (the nearer
+    was kept, the other left out, before session 43); such a method is resampled onto the
+    grid, linear between its points, and the command says which and how many frames hold
+    it; the file holds the exact time of its first frame."""
     c3d = pytest.importorskip("c3d")
     from pslog.interchange.track_formats import c3d_grid
 
@@ -195,17 +196,19 @@ def test_c3d_says_how_many_points_irregular_times_put_on_a_shared_frame(tmp_path
         frames = np.array([points for _, points, _ in reader.read_frames()])
     assert Decimal(first_s) * 1_000_000_000 == first
     said = {}
-    for part in out.split("(irregular times): ")[1].splitlines()[0].split(", "):
-        method, n, _of, total = part.split()
+    for part in out.split("cameras firing together): ")[1].split("; ")[0].split(", "):
+        method, n, _frames, _from, total, _points = part.split()
         said[method] = int(n)
         assert int(total) == len(session.tracks[method])
-    assert sum(said.values()) > 0
+    assert said and "left out" not in out
     for j, method in enumerate(labels[:-1]):
         track = session.tracks[method]
         written = int(np.count_nonzero(frames[:, j, 3] != -1))
-        assert written == len(track) - said.get(method, 0)
         frame = np.round((track.time_ns - first) * rate / 1e9).astype(int)
-        assert written == len(np.unique(frame))
+        if method in said:  # resampled: frames between its points, more than it had apart
+            assert written == said[method] > len(np.unique(frame))
+        else:  # its points, each on its own frame
+            assert written == len(track) == len(np.unique(frame))
 
 
 def test_c3d_of_regular_times_leaves_nothing_out(fused, tmp_path, cli):

@@ -64,6 +64,7 @@ _SIGINT_HELD = _hold_sigint()
 
 import argparse  # noqa: E402 (after the handler: the imports are the window it covers)
 import importlib  # noqa: E402
+import re  # noqa: E402
 
 from pslog.errors import PslogError  # noqa: E402
 
@@ -96,7 +97,16 @@ PROGRESS_COMMANDS = frozenset({"simulate", "import", "export", "fuse", "sync", "
 
 
 class _Parser(argparse.ArgumentParser):
-    """argparse with one-line errors: ``pslog CMD: error: ... (see pslog CMD --help)``."""
+    """argparse with one-line errors: ``pslog CMD: error: ... (see pslog CMD --help)``.
+
+    A value starting with ``-`` and a digit is a value, not an option (``--hsv -5,22,...``,
+    ``--distractor -2,1,0``): argparse < 3.13 took only ``-2`` or ``-2.5`` for negative
+    numbers and said "expected one argument", not naming the value; 3.13's rule (a ``-``,
+    then a digit or ``.`` and a digit) is taken over (no pslog option is like ``-1``)."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = re.compile(r"^-\.?\d")
 
     def error(self, message: str):
         self.exit(2, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 from pathlib import Path
 
 
@@ -23,7 +24,7 @@ FILES_KEY = "_pslog_files"
 
 
 def declare_files(parser: argparse.ArgumentParser, *, inputs=(), outputs=(),
-                  updates=(), sessions=()) -> None:
+                  updates=(), sessions=(), folders=()) -> None:
     """Declare which options of a command name files it reads and writes.
 
     The dispatcher (:func:`pslog.cli.main`) checks every declared output before ``run``:
@@ -42,11 +43,14 @@ def declare_files(parser: argparse.ArgumentParser, *, inputs=(), outputs=(),
         except that they may exist without ``--force``
     sessions : those of ``outputs`` that are MCAP sessions: a name whose suffix names
         another format (``-o sim.csv``) is a usage error, exit 2 (:func:`misnamed_session`)
+    folders : dests of folders the command makes (``export --tum DIR``): an output inside
+        one that does not exist yet is refused saying so (not only "output folder does not
+        exist"), whichever option comes first
     """
     files = dict(parser.get_default(FILES_KEY) or {"inputs": (), "outputs": (), "updates": (),
                                                    "sessions": ()})
     for key, more in (("inputs", inputs), ("outputs", outputs), ("updates", updates),
-                      ("sessions", sessions)):
+                      ("sessions", sessions), ("folders", folders)):
         files[key] = (*files.get(key, ()), *more)
     parser.set_defaults(**{FILES_KEY: files})
 
@@ -196,6 +200,17 @@ def check_declared_files(args: argparse.Namespace, say=None) -> None:
         kind = special_file(path)
         if kind is not None:
             raise InputError(f"not a regular file: {path} ({kind})")
+    for dest in (getattr(args, FILES_KEY, None) or {}).get("folders", ()):
+        folder = getattr(args, dest, None)
+        if not folder or os.path.exists(folder):
+            continue
+        inside = next((p for p in outputs
+                       if os.path.abspath(os.path.dirname(p)) == os.path.abspath(folder)), None)
+        if inside is not None:  # ('--csv tum/x.csv --tum tum', tum new: either order)
+            option = "--" + dest.replace("_", "-")
+            raise InputError(f"output {inside}: its folder {folder} does not exist; {option} "
+                             f"{folder} makes it, but only its own files: give {inside} a "
+                             f"folder that exists")
     check_outputs(outputs, bool(getattr(args, "force", False)), inputs, say=say)
     for path in updates:  # may exist: changed in place, but never an input, and writable
         check_output_path(path, True, inputs, say=say)

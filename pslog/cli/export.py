@@ -43,7 +43,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "truth, in millimetres (needs c3d: pip install 'pslog[c3d]')")
     add_force(parser)
     declare_files(parser, inputs=("session",),
-                  outputs=("detections", "csv", "jsonl", "parquet", "c3d"))
+                  outputs=("detections", "csv", "jsonl", "parquet", "c3d"), folders=("tum",))
 
 
 #: each file option's format (a key of ``_common.FORMATS``: its suffixes)
@@ -176,10 +176,15 @@ def _export_parquet(session, path: str, force: bool) -> None:
 def _export_c3d(session, path: str, force: bool) -> None:
     from pslog.interchange.track_formats import write_c3d
 
-    frames, rate, merged = write_c3d(session, path, force=force)
+    frames, rate, resampled = write_c3d(session, path, force=force)
     print(f"wrote {path}: {frames} frames at {rate:g} Hz, one point per method"
           + (" and the truth" if session.truth is not None else "") + " (mm)")
-    lost = {m: n for m, n in merged.items() if n}
-    if lost:  # irregular times: two points on one frame, the nearer kept
-        print("  left out, sharing a frame with a nearer point (irregular times): "
-              + ", ".join(f"{m} {n} of {len(session.tracks[m])}" for m, n in lost.items()))
+    if resampled:  # irregular times: two points on one frame (one was left out before)
+        print(f"  resampled onto the {rate:g} Hz frames, as points of theirs would share "
+              f"one (times on no common grid: rolling shutters, drifting clocks, jitter; or "
+              f"cameras firing together): "
+              + ", ".join(f"{m} {n} frames from {len(session.tracks[m])} points"
+                          for m, n in resampled.items())
+              + "; linear between points at most two frame periods apart (a longer gap "
+                "left empty, a lone point in it on its nearest frame); --csv, --jsonl or "
+                "--parquet keep every point at its own time")

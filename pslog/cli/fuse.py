@@ -584,14 +584,16 @@ def _say_borrowed_clocks(args: argparse.Namespace, session) -> None:
     brought it, most likely an earlier session's synced rig (walk42: `pslog rig show
     synced.mcap > lab.toml`, the next recording made with it, fused with the old session's
     clocks without a word; webcams' offsets move at every start). Not for a synthetic
-    recording, whose rig's clocks are the ones it rendered."""
+    recording or a simulated session, whose rig's clocks are the ones it rendered (its
+    ``simulate.*`` metadata; faults beyond them are said by ``pslog simulate``)."""
     from pslog.errors import shell_word
     from pslog.timing import CLOCK_STD_KEY
 
     metadata = session.metadata or {}
     cams = [c for c in session.rig.cameras if c.has_clock_correction]
     if (args.rig is not None or not cams or metadata.get(CLOCK_STD_KEY)
-            or "--synthetic" in str(metadata.get("source", ""))):
+            or "--synthetic" in str(metadata.get("source", ""))
+            or any(str(k).startswith("simulate.") for k in metadata)):
         return
     said = ", ".join(
         f"{c.name} " + " ".join(part for part in (

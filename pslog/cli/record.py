@@ -52,8 +52,11 @@ code 0 if any camera recorded frames, 1 and no file if none did).
 exposure, lens distortion, sensor noise, a lined green field) following --motion under the
 rig's shutter schedule, in real time unless --fast, and stores the ground truth too. A rig
 with clock corrections (clock_offset, clock_drift_ppm, readout: a rig from 'pslog sync') is
-rendered with those clock errors, each camera seeing the ball at the true time of its stamp,
-as 'pslog live --synthetic' does; the stored rig corrects them. The summary gives the
+rendered with those clock errors, as 'pslog live --synthetic' and 'pslog simulate' do: each
+shutter fires at the rig's offset on the true clock (docs/timing.md), its camera's clock
+stamps it off by the clock model (offset - clock_offset + k / fps without drift; a frame
+stamped before 0 is not taken), and the camera sees the ball at the true time of its stamp;
+the stored rig corrects them. The summary gives the
 session time the frames span and the wall time the recording took (its frame rate), then the
 wall time including starting the camera processes (a few seconds).
 

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import re
 
 import numpy as np
 
@@ -130,8 +129,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         default=[], metavar="CAM=MS",
                         help="fault: camera CAM's clock is off by MS milliseconds (true = "
                              "logged + offset; not the first camera, which defines the clock); "
-                             "repeatable. The session's rig keeps the nominal 0: 'pslog sync' "
-                             "recovers it")
+                             "repeatable. The session's rig keeps the rig's own value (0 for a rig "
+                             "without clock keys): 'pslog sync' recovers it")
     parser.add_argument("--drift", type=_camera_value("ppm", 1.0), action="append",
                         default=[], metavar="CAM=PPM",
                         help="fault: camera CAM's clock drifts by PPM parts per million (not "
@@ -139,8 +138,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--readout", type=_camera_value("ms", 1e-3, all_cameras=True),
                         action="append", default=[], metavar="[CAM=]MS",
                         help="fault: rolling shutters reading top to bottom row in MS "
-                             "milliseconds (below a frame period); MS alone: every camera; "
-                             "repeatable")
+                             "milliseconds (below a frame period); MS alone: every camera "
+                             "but those given as CAM=MS; repeatable, each camera once")
     parser.add_argument("--host-jitter", type=nonnegative_float, default=0.0, metavar="MS",
                         help="fault: standard deviation of the logged stamps around the "
                              "shutter times, milliseconds (host arrival jitter; frame "
@@ -151,10 +150,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--spurious-radius", type=_spurious_radius, default=0.0, metavar="PX",
                         help="where the false candidates are: 0, anywhere in the image; else "
                              "within PX pixels of the ball, at most 100 (default %(default)s)")
-    # '--distractor -2,1,0' (a negative X) is a value, not an option: argparse < 3.13 reads
-    # only '-2' or '-2.5' as negative numbers and said "expected one argument"; 3.13's rule
-    # (a '-' then a digit) is taken over here (this parser has no option like '-1')
-    parser._negative_number_matcher = re.compile(r"^-\.?\d")
+    # ('--distractor -2,1,0', a negative X, is a value: pslog.cli._Parser)
     parser.add_argument("--distractor", type=_distractor, action="append", default=[],
                         metavar="[CAM=]X,Y,Z",
                         help="fault: a static second orange object at world point X,Y,Z "
@@ -178,7 +174,7 @@ def run(args: argparse.Namespace) -> int:
     from pslog.log import SessionWriter
     from pslog.motion import at_rest_first, get_motion
     from pslog.records import NS
-    from pslog.rig import Rig, apply_timing, resolve_rig, timing_label
+    from pslog.rig import apply_timing, resolve_rig, timing_label
     from pslog.simulation import (
         TRUTH_CLOCK_KEY,
         SimulationOptions,
@@ -197,17 +193,20 @@ def run(args: argparse.Namespace) -> int:
         rig = apply_timing(rig, args.timing)
     timing = timing_label(rig)  # the label always says what the offsets are
     motion = get_motion(args.motion)
-    readout = {}
-    for name, value in args.readout:  # in order: a later value wins
-        readout.update({n: value for n in rig.names} if name is None else {name: value})
-    for option, pairs in (("--clock-offset", args.clock_offset), ("--drift", args.drift)):
+    for option, pairs in (("--clock-offset", args.clock_offset), ("--drift", args.drift),
+                          ("--readout", args.readout)):
         names = [name for name, _ in pairs]
-        twice = next((n for i, n in enumerate(names) if n in names[:i]), None)
-        if twice is not None:  # (the last one silently won)
-            given = ", ".join(f"{v * 1e3 if option == '--clock-offset' else v:g}"
+        twice = next((n for i, n in enumerate(names) if n in names[:i]), False)
+        if twice is not False:  # (the last one silently won; --readout 5 --readout 8 too)
+            given = ", ".join(f"{v if option == '--drift' else v * 1e3:g}"
                               for n, v in pairs if n == twice)
-            return usage_error("simulate", f"argument {option}: camera {twice} given "
-                                           f"twice ({given}): give each camera once")
+            what = (f"camera {twice}" if twice is not None
+                    else "a readout for every camera (MS alone)")
+            return usage_error("simulate", f"argument {option}: {what} given twice "
+                                           f"({given}): give each camera once")
+    # MS alone for every camera, CAM=MS for one of them, in any order
+    readout = {n: value for name, value in args.readout if name is None for n in rig.names}
+    readout.update({name: value for name, value in args.readout if name is not None})
     faults: dict[str, dict] = {"clock_offset_s": dict(args.clock_offset),
                                "clock_drift_ppm": dict(args.drift), "readout_s": readout}
     options = SimulationOptions(noise_px=args.noise_px, jitter_s=args.jitter_ms / 1e3,
@@ -255,15 +254,17 @@ def run(args: argparse.Namespace) -> int:
             return usage_error("simulate", f"argument --blackout: camera {name}'s blackout "
                                            f"starts at {start:g} s, not before the session "
                                            f"ends ({duration:g} s): it would hide nothing")
-    # the session's rig holds the nominal clock (zeros): the faults are for 'pslog sync'
-    # to find; their true values are kept in the metadata to score it
+    # the session's rig holds the nominal clock, the rig's own (zeros for a rig without
+    # clock keys): the faults are for 'pslog sync' to find; their true values are kept in
+    # the metadata to score it. (A rig file's own clock keys, a synced rig's, were zeroed
+    # too while the cameras were simulated with them: its fused tracks 14-25 mm off a
+    # readout of 25 ms, and nothing said; 'record --synthetic' keeps them)
     from pslog import progress
 
     clock = truth_clock(rig, options)
     progress.update(total=2, what=f"simulating {duration:.1f} s of {motion.name}")
     detections, truth, ball = simulate_labelled(rig, motion, duration, options)
-    nominal = Rig(tuple(c.replace(clock_offset=0.0, clock_drift_ppm=0.0, readout=0.0)
-                        for c in rig.cameras), rig.name)
+    nominal = rig
     detections, truth, n_early = drop_before_zero(detections, truth)
     ball, _, _ = drop_before_zero(ball, truth)
     settings = {"motion": motion.name, "duration_s": repr(float(duration)),
@@ -311,7 +312,8 @@ def run(args: argparse.Namespace) -> int:
           + (f" ({n_early} frame{'' if n_early == 1 else 's'} logged before t = 0 dropped)"
              if n_early else "")
           + (f"; clock faults ({', '.join(faulted)}) kept as {TRUTH_CLOCK_KEY!r} in the "
-             f"metadata, the rig holds the nominal clock: run 'pslog sync'" if faulted else ""))
+             f"metadata, the rig holds the nominal clock (its own): run 'pslog sync'"
+             if faulted else ""))
     return 0
 
 

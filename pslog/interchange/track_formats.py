@@ -260,7 +260,8 @@ def c3d_grid(session) -> tuple[float, int, int]:
     left out 30 % of a track; 240 Hz holds every point within 0.1 ms of its frame): the
     lowest that leaves out as few points as any (within that share) and that the densest
     track keeps to (:func:`_coherence` at least :data:`C3D_COHERENT`: a jittered schedule
-    keeps to no finer grid, and stays on the first), within :data:`C3D_MAX_FRAMES` frames.
+    keeps to no finer grid, and stays on the first), within :data:`C3D_GRID_MAX_FRAMES`
+    frames.
     (Review41b: two 30 fps cameras 3 ms apart first hold their points apart on a grid they
     keep to at 10 x 30 Hz, beyond the 8 x tried before.)
     """
@@ -271,7 +272,10 @@ def c3d_grid(session) -> tuple[float, int, int]:
         raise InputError(f"{session.path}: C3D needs a track of at least two points at "
                          f"different times to set its frame rate")
     interval, densest = min(spans, key=lambda s: s[0])
-    rates: list[float] = [NS / interval, NS / float(np.median(np.diff(densest.time_ns)))]
+    # (intervals > 0: points of one time, a filter's of cameras firing together, made the
+    # median 0 and the rate a ZeroDivisionError traceback)
+    steps = np.diff(densest.time_ns)
+    rates: list[float] = [NS / interval, NS / float(np.median(steps[steps > 0]))]
     fps = {cam.fps for cam in session.rig.cameras}
     if len(fps) == 1:  # the shutters' own rate: k shutter phases a frame period of the rig
         k = round(rates[0] / (frame_rate := fps.pop()))
@@ -304,10 +308,10 @@ def c3d_grid(session) -> tuple[float, int, int]:
     # C3D's frames allow (review41b: two 30 fps cameras 3 ms apart, a tenth of the ball
     # missed, lost 41 % of the points on the median's 33 Hz: the first multiple holding
     # them apart that the points keep to, 300 Hz, is k = 10, beyond the 8 tried)
-    top = max(1.0, (C3D_MAX_FRAMES - 1) * NS / max(last - earliest, 1))
+    top = max(1.0, (C3D_GRID_MAX_FRAMES - 1) * NS / max(last - earliest, 1))
     trials = sorted({round(k * f, 6) for f in {cam.fps for cam in session.rig.cameras}
                      for k in range(1, min(C3D_MULTIPLES, int(top / f)) + 1)})
-    found = [(r, first, n) for r, first, n in map(grid, trials) if n <= C3D_MAX_FRAMES]
+    found = [(r, first, n) for r, first, n in map(grid, trials) if n <= C3D_GRID_MAX_FRAMES]
     lost = [left_out(r, first) for r, first, _n in found]
     least = min(lost, default=total)
     for (r, first, n), k in zip(found, lost, strict=True):
@@ -357,8 +361,16 @@ def _coherence(time_ns: np.ndarray, rate: float) -> float:
     return float(np.hypot(np.mean(np.cos(phase)), np.mean(np.sin(phase))))
 
 
-#: most frames a C3D file holds (its header's frame numbers are 16-bit in most readers)
-C3D_MAX_FRAMES = 65535
+#: most frames of a finer grid :func:`c3d_grid` tries: what the header's 16-bit frame numbers
+#: hold, which every reader reads (a finer grid is never the reason for a long file)
+C3D_GRID_MAX_FRAMES = 65535
+#: most frames a C3D file of pslog holds. Beyond 65535 the header's 16-bit first and last
+#: frame say 65535 and the count is in the parameters, as c3d.org's "Maintaining C3D frame
+#: count compatibility" has it (the ``c3d`` package writes them so): ``POINT:LONG_FRAMES``
+#: (a float32: whole numbers exact up to 2**24, hence this limit; 51.8 h at 90 Hz),
+#: ``POINT:FRAMES`` 65535 and ``TRIAL:ACTUAL_START_FIELD`` / ``ACTUAL_END_FIELD`` (each two
+#: 16-bit words, low first), which btk (Mokka) and the ``c3d`` reader take
+C3D_MAX_FRAMES = 2**24
 
 
 def c3d_check(session) -> None:
@@ -370,9 +382,11 @@ def c3d_check(session) -> None:
         raise InputError("--c3d needs the c3d package, which is not installed: pip install "
                          "'pslog[c3d]' (or pip install c3d)") from None
     rate, _first, n_frames = c3d_grid(session)
-    if n_frames > C3D_MAX_FRAMES:
+    if n_frames > C3D_MAX_FRAMES:  # (its frame count, a float32 parameter, inexact beyond)
         raise InputError(f"{session.path}: {n_frames} frames at {rate:g} Hz: beyond the "
-                         f"{C3D_MAX_FRAMES} frames a C3D file holds")
+                         f"{C3D_MAX_FRAMES} frames a C3D file counts exactly (its "
+                         f"POINT:LONG_FRAMES is a 32-bit float); export --csv, --jsonl or "
+                         f"--parquet, or cut the session")
 
 
 def write_c3d(session, path: str | Path, *, force: bool = False
@@ -384,9 +398,14 @@ def write_c3d(session, path: str | Path, *, force: bool = False
     1000), the unit biomechanics tools expect; floating-point storage, so nothing is lost to
     a scale factor. A frame where a method has no point holds an invalid point (residual
     -1); the residual of a valid point is the method's ``ray_miss_m`` in mm when it has one,
-    else 0. Where two points of a method fall on one frame (irregular times: jittered host
-    stamps, dropped and re-sent frames) the nearer in time is kept and the other left out;
-    how many is returned, for the command to say.
+    else 0. A method whose points each have a frame of their own is written point by point,
+    each on its nearest frame. One of which two points would fall on one frame (irregular
+    times: rolling shutters, drifting clocks, jittered host stamps; the nearer was kept and
+    the other left out, 11-30 % of a rolling-shutter session's points) is resampled onto the
+    grid instead (:func:`_resample`): its position at each frame's time, linear between the
+    points either side, where they are at most :data:`C3D_BRIDGE_PERIODS` frame periods
+    apart (a longer gap stays empty, but for a lone point in it, on its nearest frame);
+    which methods, and their valid frames, are returned for the command to say.
 
     C3D numbers its frames with integers (``POINT:RATE`` and the header's first frame): the
     first frame's time is ``(first_frame - 1) / rate`` on the session clock only to within
@@ -395,7 +414,7 @@ def write_c3d(session, path: str | Path, *, force: bool = False
 
     Returns
     -------
-    (n_frames, rate_hz, {method: points left out, sharing a frame with a nearer one})
+    (n_frames, rate_hz, {method resampled: its valid frames})
     """
     c3d_check(session)
     import c3d
@@ -409,20 +428,23 @@ def write_c3d(session, path: str | Path, *, force: bool = False
     points = np.zeros((n_frames, len(labels), 5), dtype=np.float32)
     points[:, :, 3] = -1.0  # invalid until a point is put there
     frame_ns = first + np.round(np.arange(n_frames) * (NS / rate)).astype(np.int64)
-    merged: dict[str, int] = {}
+    resampled: dict[str, int] = {}
     for j, (method, track) in enumerate(tracks.items()):
         frames = np.clip(np.round((track.time_ns - first) * rate / NS).astype(np.int64), 0,
                          n_frames - 1)
-        miss = np.abs(track.time_ns - frame_ns[frames])
-        order = np.lexsort((miss, frames))  # per frame, the nearest point first
-        keep = order[np.r_[True, frames[order][1:] != frames[order][:-1]]] if len(
-            track) else order
-        merged[method] = len(track) - len(keep)
         residual = track.quality.get("ray_miss_m", np.zeros(len(track)))
         residual = np.where(np.isfinite(residual), residual * 1000.0, 0.0)
-        points[frames[keep], j, :3] = track.position_world[keep] * 1000.0
-        points[frames[keep], j, 3] = residual[keep]
-        points[frames[keep], j, 4] = 0.0
+        if len(np.unique(frames)) == len(track):  # a frame for each point: the points
+            points[frames, j, :3] = track.position_world * 1000.0
+            points[frames, j, 3] = residual
+            points[frames, j, 4] = 0.0
+            continue
+        valid, position, res = _resample(track.time_ns, track.position_world, residual,
+                                         frame_ns, C3D_BRIDGE_PERIODS * NS / rate)
+        points[valid, j, :3] = position * 1000.0
+        points[valid, j, 3] = res
+        points[valid, j, 4] = 0.0
+        resampled[method] = len(valid)
     if has_truth:
         at = session.truth.at(frame_ns)
         ok = np.all(np.isfinite(at), axis=1)
@@ -446,5 +468,60 @@ def write_c3d(session, path: str | Path, *, force: bool = False
         # tracker has: not a problem to show the user
         warnings.simplefilter("ignore", UserWarning)
         writer.write(f)
-    return n_frames, rate, merged
+    return n_frames, rate, resampled
+
+
+#: :func:`write_c3d` resamples a method's track at a frame's time between the points either
+#: side of it when they are at most this many frame periods apart (one point missed between
+#: them bridged; a longer gap stays empty, as the method left it)
+C3D_BRIDGE_PERIODS = 2.0
+
+
+def _resample(time_ns: np.ndarray, position: np.ndarray, residual: np.ndarray,
+              frame_ns: np.ndarray, bridge_ns: float
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A track at the frame times ``frame_ns`` (a uniform grid): ``(frames, positions,
+    residuals)`` of the frames inside it, each linear in time between the points either
+    side of its time (a point at the frame's time exactly: that point), where those are at
+    most ``bridge_ns`` apart; and a point with no frame so (its neighbours beyond the bridge
+    on both sides) on its nearest frame, so that every point is in the file. Points of one
+    time (cameras firing together) are first made one, their mean."""
+    order = np.argsort(time_ns, kind="stable")
+    t, inverse, count = np.unique(np.asarray(time_ns, np.int64)[order], return_inverse=True,
+                                  return_counts=True)
+    pos = np.zeros((len(t), 3))
+    np.add.at(pos, inverse, np.asarray(position, np.float64)[order])
+    pos /= count[:, None]
+    res = np.zeros(len(t))
+    np.add.at(res, inverse, np.asarray(residual, np.float64)[order])
+    res /= count
+    if len(t) == 0:
+        return np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0)
+    after = np.searchsorted(t, frame_ns, side="left")  # first point at or after the frame
+    exact = (after < len(t)) & (t[np.minimum(after, len(t) - 1)] == frame_ns)
+    inside = (after > 0) & (after < len(t))
+    a = np.clip(after - 1, 0, len(t) - 1)
+    b = np.clip(after, 0, len(t) - 1)
+    inside &= (t[b] - t[a]) <= bridge_ns
+    frames = np.flatnonzero(exact | inside)
+    a, b = a[frames], b[frames]
+    w = np.where(exact[frames], 1.0,
+                 (frame_ns[frames] - t[a]) / np.maximum(t[b] - t[a], 1).astype(np.float64))
+    out_pos = pos[a] + w[:, None] * (pos[b] - pos[a])
+    out_res = res[a] + w * (res[b] - res[a])
+    # a point with no neighbour within the bridge (a lone point between gaps) is on no
+    # frame yet: on its nearest frame, as it is (the nearest in time of such points there)
+    period = float(frame_ns[1] - frame_ns[0]) if len(frame_ns) > 1 else 1.0
+    near = np.clip(np.round((t - frame_ns[0]) / period).astype(np.int64), 0,
+                   len(frame_ns) - 1)
+    lone = np.flatnonzero(~np.isin(near, frames))
+    if len(lone):
+        lone = lone[np.lexsort((np.abs(t[lone] - frame_ns[near[lone]]), near[lone]))]
+        lone = lone[np.r_[True, near[lone][1:] != near[lone][:-1]]]
+        frames = np.concatenate([frames, near[lone]])
+        out_pos = np.concatenate([out_pos, pos[lone]])
+        out_res = np.concatenate([out_res, res[lone]])
+        order = np.argsort(frames)
+        frames, out_pos, out_res = frames[order], out_pos[order], out_res[order]
+    return frames, out_pos, out_res
 

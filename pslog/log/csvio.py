@@ -23,6 +23,11 @@ Detections CSV (import and export use exactly this format)::
 - Fields separated by commas, or by tabs throughout (a first line of tabs and no comma: a
   .tsv, a spreadsheet's "text, tab delimited").
 
+Text cells (camera names, methods) that a spreadsheet would take for a formula, those
+starting with ``=`` ``+`` ``-`` ``@`` (a rig imported with a camera ``-x``, ``=1+2``), are
+written with a ``'`` before them, as OWASP advises against CSV injection (:func:`csv_text`);
+import reads ``'-x`` back as ``-x``.
+
 Export writes all six columns, times as exact decimals with 9 digits and pixels with
 ``repr`` precision, and a row for every frame without a candidate, so export -> import
 reproduces every frame and value (import -> export -> import too).
@@ -56,6 +61,29 @@ from ..rig import Rig
 DETECTION_COLUMNS = ("camera", "time", "u", "v", "frame", "score")
 _REQUIRED = ("camera", "time", "u", "v")
 TRACK_COLUMNS = ("time", "x", "y", "z", "camera", "method")
+
+
+#: First characters that make a spreadsheet read a cell as a formula (OWASP, "CSV
+#: Injection"; tab and carriage return too, which no camera name holds).
+FORMULA_STARTS = ("=", "+", "-", "@", "\t", "\r")
+
+
+def csv_text(text: str) -> str:
+    """``text`` as a CSV text cell a spreadsheet shows as text: a ``'`` before a cell that
+    starts with one of :data:`FORMULA_STARTS` (``=1+2`` -> ``'=1+2``), or with ``'`` then
+    one of them (``'=x`` -> ``''=x``, so :func:`csv_text_read` gives every text back);
+    other text as it is. For text cells only: a number (``-0.5``) is written as it is."""
+    if text.lstrip("'").startswith(FORMULA_STARTS):
+        return "'" + text
+    return text
+
+
+def csv_text_read(text: str) -> str:
+    """The text :func:`csv_text` wrote ``text`` for: one leading ``'`` removed if what
+    follows it is a formula's start (after any more ``'``); else ``text`` as it is."""
+    if text.startswith("'") and text.lstrip("'").startswith(FORMULA_STARTS):
+        return text[1:]
+    return text
 
 
 class _Invalid(ValueError):
@@ -381,6 +409,8 @@ def read_detections_csv(path, rig: Rig, camera: str | None = None,
         has_frame, has_score = "frame" in col, "score" in col
         for line, row in csv_rows(reader, len(header), path):
             name = row[col["camera"]].strip() if "camera" in col else str(camera)
+            if csv_text_read(name) in index:  # '-x: the rig's -x as csv_text wrote it
+                name = csv_text_read(name)
             if name not in index:  # another Unicode spelling of a rig's name, or None
                 name = rig.spelling(name) or name
             if camera is not None and name != camera:
@@ -641,7 +671,8 @@ def write_detections_csv(detections: Detections, path, *, force: bool = False,
     rows = np.concatenate([detections.cand_frame, empty])
     order = np.argsort(rows, kind="stable")
     rows = rows[order]
-    names = np.asarray(detections.camera_names, dtype=object)[detections.frame_camera[rows]]
+    names = np.asarray([csv_text(n) for n in detections.camera_names],
+                       dtype=object)[detections.frame_camera[rows]]
     origin = int(origin_ns)
     times = [t + origin for t in detections.frame_time_ns[rows].tolist()]  # Python ints
     frames = detections.frame_index[rows].tolist()
@@ -668,20 +699,22 @@ def export_tracks_csv(session, path, *, force: bool = False) -> int:
     if not tracks:
         raise InputError(f"{session.path} has no fused tracks (run 'pslog fuse' first)")
     quality = sorted({k for t in tracks.values() for k in t.quality})
-    names = session.rig.names
+    names = [csv_text(n) for n in session.rig.names]
     origin = session_clock_origin(session.metadata, session.path)
     count = 0
     with replacing(path, force=force, inputs=[session.path]) as f:
-        f.write(",".join((*TRACK_COLUMNS, *quality)) + "\n")
+        f.write(",".join((*TRACK_COLUMNS, *map(csv_text, quality))) + "\n")
         for method in sorted(tracks):
             track = tracks[method]
+            method_cell = csv_text(method)
             cols = [track.quality[k].tolist() if k in track.quality else [None] * len(track)
                     for k in quality]
             for i, (t, (x, y, z), c) in enumerate(zip(
                     track.time_ns.tolist(), track.position_world.tolist(),
                     track.camera.tolist(), strict=True)):
                 extra = "".join("," + ("" if col[i] is None else repr(col[i])) for col in cols)
-                f.write(f"{format_time(t + origin)},{x!r},{y!r},{z!r},{names[c]},{method}{extra}\n")
+                f.write(f"{format_time(t + origin)},{x!r},{y!r},{z!r},{names[c]},"
+                        f"{method_cell}{extra}\n")
             count += len(track)
     return count
 
