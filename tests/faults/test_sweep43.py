@@ -79,7 +79,7 @@ def test_c3d_beyond_what_its_frame_count_holds_is_refused(tmp_path):
     """Two throws 190,000 s apart (53 hours at 90 Hz: 17.1 million frames, beyond the 2**24 a
     float32 POINT:LONG_FRAMES counts exactly): refused in one line naming the frames and the
     formats that keep every point, nothing written (up to 2**24 a C3D is written, its count
-    in the parameters: tests/test_s43_exports.py)."""
+    in the parameters: tests/test_export_paths_and_c3d.py)."""
     from decimal import Decimal
 
     burst = tmp_path / "burst.mcap"
