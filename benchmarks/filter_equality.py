@@ -99,7 +99,9 @@ BASE_OPTIONS = compiled.FilterOptions(jump_rate_per_s=0.0, start_models=False, a
                                          if k in compiled.FilterOptions.__dataclass_fields__},
                                       # (session 31's predicted floor contact; session
                                       # 30's hold for the next camera)
-                                      **{k: None for k in ("floor_m", "hold_nis")
+                                      # (session 43's start speed bound: None, no bound)
+                                      **{k: None for k in ("floor_m", "hold_nis",
+                                                           "max_speed_m_s")
                                          if k in compiled.FilterOptions.__dataclass_fields__})
 
 COLUMNS = ("time_ns", "camera", "position", *compiled.FILTER_QUALITY)
