@@ -474,7 +474,7 @@ LEFT_OUT_TEXT = {
              "doubt\", \"An unmoved choice at the start\")",
     "underdetermined_end": "smooth: an end beyond a kick that too few detections hold",
     "contradicted_run": "smooth: consecutive detections of two or more cameras that the fit "
-                        "rejected: the ball was where the fit is not there (a kick or bounce "
+                        "rejected: the ball was not where the fit puts it (a kick or bounce "
                         "it did not find)",
 }
 
