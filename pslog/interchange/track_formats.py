@@ -484,7 +484,8 @@ def _resample(time_ns: np.ndarray, position: np.ndarray, residual: np.ndarray,
     residuals)`` of the frames inside it, each linear in time between the points either
     side of its time (a point at the frame's time exactly: that point), where those are at
     most ``bridge_ns`` apart; and a point with no frame so (its neighbours beyond the bridge
-    on both sides) on its nearest frame, so that every point is in the file. Points of one
+    on both sides) on its nearest frame, so that every point is in the file (but for two such
+    points nearest one frame with no frame between them: the nearer). Points of one
     time (cameras firing together) are first made one, their mean."""
     order = np.argsort(time_ns, kind="stable")
     t, inverse, count = np.unique(np.asarray(time_ns, np.int64)[order], return_inverse=True,
