@@ -45,7 +45,7 @@ def test_recorded_stamps_are_simulates_and_the_phases_the_rigs(tmp_path):
 
 
 def test_simulate_keeps_the_rig_files_own_clock(tmp_path):
-    """A rig file with clock keys (cam3 a 25 ms rolling shutter, cam2's clock 3 ms ahead: a
+    """A rig file with clock keys (cam3 a 25 ms rolling shutter, cam2's clock 3 ms behind: a
     synced rig's): ``pslog simulate`` simulated the cameras with them but wrote the session's
     rig with zeros, silently; fused, smooth was 13.6 mm off the truth (2.0 with the rig's
     clock). Now the session's rig is the rig's own, as ``record --synthetic``'s; faults given
