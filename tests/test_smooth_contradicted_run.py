@@ -48,9 +48,18 @@ def test_spans_by_hand():
     # rows outside the fit (used False) are not in the order: the run goes across them
     assert _spans(t, [0, 1, 2, 0, 1, 2, 0, 1], [1, 1, 0, 1, 1, 1, 1, 1],
                   [0, 1, 0, 1, 0, 0, 0, 0]) == [[10, 50]]
-    # a fitted neighbour at the run's own time (synchronised shutters) falls inside it
-    assert _spans([10, 20, 20, 30, 40], [0, 0, 1, 2, 0], used[:5],
-                  [0, 0, 1, 1, 0]) == [[19, 40]]
+    # synchronised shutters: the detections of one time count together, whatever the
+    # cameras' order; a time at which one camera agrees with the fit breaks a run
+    t3 = [0, 0, 0, 33, 33, 33, 66, 66, 66, 99, 99, 99]
+    c3 = [0, 1, 2] * 4
+    u3 = [1] * 12
+    assert _spans(t3, c3, u3, [0, 0, 0, 0, 1, 1, 0, 0, 0, 0, 0, 0]) == []  # cam0 agrees
+    assert _spans(t3, c3, u3, [0, 0, 0, 1, 0, 1, 0, 0, 0, 0, 0, 0]) == []  # cam1 agrees
+    assert _spans(t3, c3, u3, [0, 0, 0, 0, 0, 1, 1, 0, 0, 0, 0, 0]) == []
+    assert _spans(t3, c3, u3, [0, 0, 0, 1, 1, 1, 0, 0, 0, 0, 0, 0]) == [[0, 66]]
+    # one camera at one time, another at the next, the rest not fitted there: a run
+    assert _spans(t3, c3, [1, 1, 1, 0, 0, 1, 1, 0, 0, 1, 1, 1],
+                  [0, 0, 0, 0, 0, 1, 1, 0, 0, 0, 0, 0]) == [[0, 99]]
     assert _spans(t, [0] * 8, used, [0] * 8) == []
     assert _spans(t, [0] * 8, [0] * 8, [1] * 8) == []
 

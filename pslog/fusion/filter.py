@@ -3124,19 +3124,25 @@ class BallFilter:
                     self._I[_ICAP] = min(max(int(self._I[_ICAP]), len(window) + 1),
                                          self.options.init_max_window)
                 break
-            elif fit is not None and not self._too_fast(fit[0], fit[1]):
+            elif fit is not None:
                 x, P, residuals = fit
                 # the noise estimate starts again at each (re)start, from its prior (or the
                 # estimate, if larger) and the window's residuals: a lost track may mean
                 # the detector's noise changed, and an estimate that had shrunk below it
                 # would gate out the very detections that could raise it again
                 var = self._start_var()
+                noise = (float(self._S[_SALPHA]), float(self._S[_SVAR]))
                 self._S[_SALPHA] = self.options.noise_prior_weight
                 self._S[_SVAR] = self._prior_var(len(window), residuals, var)
                 self._window_noise(len(window), residuals)
                 # the fit's covariance was σ² (JᵀJ)⁻¹ at the start's σ²: at the updated one
                 scale = float(self._S[_SVAR]) / var
                 P = [a * scale for a in P]
+                if self._too_fast(x, P):  # (at the updated σ²: the window's own noise)
+                    # refused like a fit failing its tests: the noise estimate as it was
+                    self._S[_SALPHA], self._S[_SVAR] = noise
+                    del window[0]
+                    continue
                 lost = self._lost_prediction(window)
                 if lost is not None:
                     x, P = _with_prior(x, P, *lost[0])
@@ -3174,7 +3180,8 @@ class BallFilter:
         """Whether a start's fit is faster than any ball: its speed ``|v̂|`` exceeds
         ``max_speed_m_s`` by more than three standard deviations of the speed, ``σ² =
         v̂ᵀ P_vv v̂ / |v̂|²`` (the speed's variance to first order). ``x`` (6,) position and
-        velocity, ``P`` (36,) their covariance, row-major."""
+        velocity, ``P`` (36,) their covariance, row-major (the fit's at the pixel variance
+        the window's residuals updated, as the start takes it)."""
         bound = self.options.max_speed_m_s
         if bound is None:
             return False

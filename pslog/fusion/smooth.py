@@ -123,10 +123,12 @@ def fuse_smooth(prep: Prepared, rig: Rig, options) -> Track:
 def contradicted_spans(time_ns: np.ndarray, camera: np.ndarray, used: np.ndarray,
                        rejected: np.ndarray) -> np.ndarray:
     """(k, 2) int64 ns, open intervals ``(a, b)`` where the fit is contradicted: each holds a
-    run of consecutive fitted detections (time order) that the fit rejected, from two cameras
-    or more, ``a`` the fitted detection before the run that it did not reject (the run's
-    first time when none), ``b`` the one after (the run's last when none); a neighbour at a
-    run's own time falls inside it.
+    run of consecutive fitted capture times (time order) at which the fit rejected every
+    fitted detection, from two cameras or more together, ``a`` the fitted time before the
+    run (one nanosecond before the run's first when none), ``b`` the one after (one after
+    its last when none). Detections of one time (synchronised shutters) count together, in
+    whatever camera order: a time at which some camera's detection agrees with the fit is
+    no part of a run (so the spans do not depend on the cameras' order in the rig).
 
     Why (session 43): the fit rejects a detection of the ball it models with probability
     1e-4 (:attr:`~pslog.estimation.Fit.rejected`); a spurious blob the gate let in is one
@@ -140,22 +142,23 @@ def contradicted_spans(time_ns: np.ndarray, camera: np.ndarray, used: np.ndarray
     time_ns : (n,) int64, sorted; camera : (n,) int; used, rejected : (n,) bool (Fit's)
     """
     rows = np.flatnonzero(used)
-    if len(rows) == 0:
-        return np.zeros((0, 2), np.int64)
     flag = np.asarray(rejected, bool)[rows]
     if not flag.any():
         return np.zeros((0, 2), np.int64)
-    edges = np.diff(np.r_[0, flag.astype(np.int8), 0])
-    starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)  # [start, end)
     t, cam = time_ns[rows], np.asarray(camera)[rows]
+    # the fitted capture times, each rejected when every detection at it is
+    times, group = np.unique(t, return_inverse=True)
+    accepted = np.zeros(len(times), bool)
+    accepted[group[~flag]] = True
+    edges = np.diff(np.r_[0, (~accepted).astype(np.int8), 0])
+    starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)  # [start, end)
     out = []
     for a, b in zip(starts.tolist(), ends.tolist(), strict=True):
-        if len(np.unique(cam[a:b])) < 2:
+        inside = (group >= a) & (group < b)
+        if len(np.unique(cam[inside])) < 2:
             continue
-        # (a neighbour at the run's own time, synchronised shutters: the span holds it too)
-        lo = min(t[a - 1], t[a] - 1) if a > 0 else t[a] - 1
-        hi = max(t[b], t[b - 1] + 1) if b < len(t) else t[b - 1] + 1
-        out.append((lo, hi))
+        out.append((times[a - 1] if a > 0 else times[a] - 1,
+                    times[b] if b < len(times) else times[b - 1] + 1))
     return np.array(out, np.int64).reshape(-1, 2)
 
 
