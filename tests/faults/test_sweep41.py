@@ -200,10 +200,19 @@ def test_datagrams_a_flood_makes_the_kernel_drop_are_counted(tmp_path):
                 tx.sendto(b"NOPE" + bytes(2000), ("127.0.0.1", port))
                 sent += 1
             run.proc.send_signal(signal.SIGCONT)
-            time.sleep(1.0)  # (the buffer read)
-            # the kernel's count comes with the next datagram it queues
-            tx.sendto(b"NOPE" + bytes(2000), ("127.0.0.1", port))
-            sent += 1
+            # the kernel's count comes with the next datagram it queues, once the fuser has
+            # read the buffer: one more each 0.25 s until a status says it (on a loaded
+            # machine the buffer took longer than the 1 s waited before, and the one
+            # datagram sent then found it full: received 1,927, no overflow said)
+            deadline = time.monotonic() + HANG_S
+            while not any("overflow" in x for x in run.err if x.startswith("live ")):
+                assert time.monotonic() < deadline, "\n".join(run.err[-3:])
+                tx.sendto(b"NOPE" + bytes(2000), ("127.0.0.1", port))
+                sent += 1
+                time.sleep(0.25)
+            # the datagrams sent are all read or counted: a status after the last one
+            n_status = len(run.err)
+            run.wait_err(r"^live ", start=n_status)
             time.sleep(0.5)
     err = "\n".join(run.err)
     final = [x for x in err.splitlines() if x.startswith("live ")][-1]

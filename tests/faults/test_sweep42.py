@@ -278,11 +278,13 @@ def test_live_of_cameras_faster_than_333_fps_runs(tmp_path):
     text = _paper3_toml().replace("fps = 30.0", "fps = 500.0")
     (tmp_path / "rig.toml").write_text(text)
     done = run_pslog("live", "--rig", "rig.toml", "--synthetic", "--timing", "typeA",
-                     "--duration", "0.5", "--listen", "udp://127.0.0.1:0", "--jsonl",
+                     "--duration", "3", "--listen", "udp://127.0.0.1:0", "--jsonl",
                      "--record", "live.mcap", cwd=tmp_path, timeout=120)
     assert done.code == 0, done.stderr
     assert "tolerance" not in done.stderr
-    assert done.stdout.count("\n") >= 1  # points, one JSON line each (how many: the load)
+    # points, one JSON line each (how many: the load; in 0.5 s a loaded CI machine's camera
+    # processes had sent 66 frames of 750 and no point was fused yet)
+    assert done.stdout.count("\n") >= 1
     assert (tmp_path / "live.mcap").is_file()
 
 
