@@ -1816,7 +1816,7 @@ def _refine_pass(problem: _Problem, control: np.ndarray, sigma: float, r: np.nda
         b = np.minimum(known + spacing, last_ok)
         ok = a < b
         search = ok if only is None else ok & only[p]
-        kept.append((p, known[ok], search[ok]))
+        kept.append((p, here, known[ok], search[ok]))
         if np.any(search):
             wide.append((p, here, known[search], np.stack([a[search], b[search]], axis=1),
                          limits[search]))
@@ -1858,15 +1858,59 @@ def _refine_pass(problem: _Problem, control: np.ndarray, sigma: float, r: np.nda
     searched = {job[0]: tau for job, tau in zip(wide, taus, strict=True)}
     out = [np.zeros(0) for _ in breaks]
     dropped = [np.zeros(0) for _ in breaks]
-    for p, known, search in kept:
+    refined, moved = [], []
+    for p, here, known, search in kept:
         tau = known.copy()
         if p in searched:
             tau[search] = searched[p]
+        refined.append((p, here, tau))
+        moved.append(np.abs(tau - known))
+    # (the gains of the breaks within a spacing of another: which of them stays)
+    gains = _crowded_gains(refined, t_obs, J, target, weight, spacing, options)
+    for (p, _, tau), how_far, gain in zip(refined, moved, gains, strict=True):
         # a break the moved detections no longer allow (too near a piece's end) is dropped
-        out[p] = _one_per_span(tau, np.abs(tau - known), spacing)
+        out[p] = _one_per_span(tau, how_far, spacing, gain)
         if len(out[p]) < len(tau):  # merged: the instants that went
             dropped[p] = np.setdiff1d(tau, out[p])
     return out, dropped
+
+
+def _crowded_gains(refined: list, t_obs: np.ndarray, J: np.ndarray, target: np.ndarray,
+                   weight: np.ndarray, spacing: float, options: SmoothOptions
+                   ) -> list[np.ndarray]:
+    """Per piece ``(piece, rows in time order, refined breaks (b,))`` of ``refined``: the
+    gain (b,) (σ² units, :func:`_breaks.gain_at`) of each break that lies within a knot
+    spacing of a neighbour, on the problem linearised at the fit the refine ran at, its
+    window cut at the nearest breaks *outside* its crowd (a run of breaks each within a
+    spacing of the next: of those only one stays, :func:`_one_per_span`, so none of the
+    others bounds the test of its rivals); NaN for the breaks alone (their gain decides
+    nothing). Each crowded break's gain is the likelihood ratio of that break alone in the
+    crowd's place: the same test for each rival, on the same detections."""
+    jobs, where = [], []
+    out = []
+    for k, (p, here, tau) in enumerate(refined):
+        out.append(np.full(len(tau), np.nan))
+        order = np.argsort(tau)
+        s = tau[order]
+        close = np.diff(s) <= spacing
+        if not np.any(close):
+            continue
+        crowded = np.zeros(len(s), dtype=bool)
+        crowded[1:] |= close
+        crowded[:-1] |= close
+        crowd = np.cumsum(np.r_[True, ~close])  # (sorted breaks' runs, numbered from 1)
+        first = np.searchsorted(crowd, crowd, side="left")
+        last = np.searchsorted(crowd, crowd, side="right") - 1
+        lo = np.where(first > 0, s[np.maximum(first - 1, 0)], -np.inf)
+        hi = np.where(last < len(s) - 1, s[np.minimum(last + 1, len(s) - 1)], np.inf)
+        m = np.flatnonzero(crowded)
+        jobs.append((p, here, s[m], np.stack([s[m], s[m]], axis=1),
+                     np.stack([lo[m], hi[m]], axis=1)))
+        where.append((k, order[m]))
+    results = _scan_pieces(jobs, t_obs, J, target, weight, spacing, options, gains=True)
+    for (k, idx), (_, gain) in zip(where, results, strict=True):
+        out[k][idx] = gain
+    return out
 
 
 def _confirmed_breaks(problem: _Problem, control: np.ndarray, sigma: float, r: np.ndarray,
@@ -1909,24 +1953,39 @@ def _confirmed_breaks(problem: _Problem, control: np.ndarray, sigma: float, r: n
     return out
 
 
-def _one_per_span(tau: np.ndarray, moved: np.ndarray, spacing: float) -> np.ndarray:
+def _one_per_span(tau: np.ndarray, moved: np.ndarray, spacing: float,
+                  gain: np.ndarray | None = None) -> np.ndarray:
     """The refined breaks ``tau`` sorted, never two within a knot spacing: of two that the
-    refinement brought that close, the one it ``moved`` less (session 25; before, the
-    earlier). A break the refine moved onto its neighbour is explaining the neighbour's
+    refinement brought that close, the one with the larger ``gain`` (each alone in the
+    pair's place, :func:`_crowded_gains`; session 43), on equal gains (or without them)
+    the one it ``moved`` less (session 25; before, the earlier).
+
+    Session 25: a break the refine moved onto its neighbour is explaining the neighbour's
     jump: a break the find added beside a known one that the loose fit had placed a few ms
     off (its residual passing for a second jump by just over the threshold) moved 17 ms onto
     it while the known one stayed, and keeping the earlier put the kick 11 ms off
-    (`wide3` rally-6600 of ``bench_dirty.py --more --first-seed 6600``: 45 mm)."""
+    (`wide3` rally-6600 of ``bench_dirty.py --more --first-seed 6600``: 45 mm). Session 43:
+    the converse: a break the loose fit's third round added one spacing beside one it had
+    placed 7 ms off a kick (a noise pattern at 28 σ², threshold 25) did not move, the
+    misplaced one moved 5.5 ms onto the kick, and the one moved less — the spurious one —
+    stayed; its neighbour's search then pulled the kick 80 ms before onto it too, and that
+    jump lost its break (``paper3`` rally-72703 of ``bench_dirty.py --more --first-seed
+    72700 --misses 0.1``: 54 mm; whether the noise pattern passed depended on the knot
+    grid's phase, which a blackout 4 s earlier moved). How far a break moved says which
+    one the refine found better only where one of them explains a jump; the likelihood
+    ratio says it wherever they are: 1934 σ² for the break on the kick, 947 for the other."""
     order = np.argsort(tau)
     new, moved = tau[order], moved[order]
     if np.all(np.diff(new) > spacing):
         return new
+    score = np.zeros(len(new)) if gain is None else np.nan_to_num(
+        np.asarray(gain, dtype=np.float64)[order], nan=-np.inf)
     keep = np.ones(len(new), dtype=bool)
     last = 0
     for i in range(1, len(new)):
         if new[i] - new[last] > spacing:
             last = i
-        elif moved[i] < moved[last]:
+        elif score[i] > score[last] or (score[i] == score[last] and moved[i] < moved[last]):
             keep[last] = False
             last = i
         else:
