@@ -72,8 +72,8 @@ def test_an_isolated_break_gains_in_context_what_its_local_test_gives(confirm_ar
     k = int(np.argmax(room))
     assert room[k] > 2 * trajectory._WINDOW_SPANS * spacing
     X = problem.positions(control)
-    in_context = trajectory._gain_in_context(problem, X, r, J, w, sigma, spacing, here, known,
-                                             float(known[k]))
+    in_context = trajectory._gain_in_context(problem, X, r, J, w, sigma, spacing, here,
+                                             t_obs[here], known, float(known[k]))
     [(_, local)] = trajectory._scan_pieces(
         [(p, here, known[k:k + 1], np.array([[known[k], known[k]]]), limits[k:k + 1])], t_obs,
         J, trajectory._linear_target(J, X, r), w / sigma**2, spacing, options, gains=True)
