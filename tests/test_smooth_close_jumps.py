@@ -16,7 +16,7 @@ from _rally import rally
 
 from pslog import apply_timing, builtin_rig
 from pslog.estimation import SmoothOptions, fit_trajectory
-from pslog.estimation.trajectory import _free_bounds, _one_per_span
+from pslog.estimation.trajectory import _free_bounds, _free_of, _one_per_span
 from pslog.records import NS, Observations
 from pslog.simulation import SimulationOptions, simulate
 
@@ -69,3 +69,17 @@ def test_of_two_breaks_refined_into_one_span_the_one_moved_less_stays():
     # apart: every break, sorted
     np.testing.assert_array_equal(_one_per_span(tau[[3, 0, 1]], moved[[3, 0, 1]], 0.034),
                                   tau[[0, 1, 3]])
+
+
+def test_the_end_of_the_free_bounds_is_free_whatever_the_rounding():
+    # session 43: an instant a search's bounds leave exactly a spacing from a known break
+    # (``side + h``) is free; ``|τ - side| > h`` alone says so for about half of them
+    rng = np.random.default_rng(74301)
+    side = rng.uniform(0.0, 600.0, 2000)
+    h = rng.uniform(0.02, 0.07, 2000)
+    lo, _ = _free_bounds(side - 1.0, side + 1.0, np.stack([side, side + 10.0], axis=1), h)
+    assert not np.all(np.abs(lo - side) > h)  # (the rounding's last bit, either way)
+    for k in range(len(side)):
+        assert _free_of(lo[k:k + 1], side[k:k + 1], float(h[k]))[0]
+    # and an instant within a spacing is not
+    assert not _free_of(side[:1] + 0.999 * h[0], side[:1], float(h[0]))[0]
