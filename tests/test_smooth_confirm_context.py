@@ -11,14 +11,13 @@ detections missed): breaks at its two kicks 80 ms apart (6.5821 and 6.6621 s), b
 
 from __future__ import annotations
 
-import copy
-
 import numpy as np
 import pytest
 from _rally import rally
+from _stages import first_arguments
 
 from pslog import apply_timing, builtin_rig
-from pslog.estimation import SmoothOptions, fit_trajectory, trajectory
+from pslog.estimation import trajectory
 from pslog.records import NS
 from pslog.simulation import SimulationOptions, simulate
 
@@ -33,19 +32,7 @@ def confirm_arguments():
     motion, kicks = rally(8.0, seed=SEED, speed=4.0 + SEED % 3, kick_every_s=0.9)
     detections, _ = simulate(rig, motion, 8.0, SimulationOptions(
         noise_px=0.3, seed=SEED, miss_rate=0.1, drop_rate=0.05))
-    seen = []
-    real = trajectory._confirmed_breaks
-
-    def capture(*args):
-        seen.append(copy.deepcopy(args))
-        return real(*args)
-
-    trajectory._confirmed_breaks = capture  # (the real confirmation, its arguments kept)
-    try:
-        fit_trajectory(detections.best(), rig, SmoothOptions())
-    finally:
-        trajectory._confirmed_breaks = real
-    return seen[0], np.asarray(kicks)
+    return first_arguments("_confirmed_breaks", detections.best(), rig), np.asarray(kicks)
 
 
 def test_two_breaks_at_kicks_80_ms_apart_are_both_confirmed(confirm_arguments):

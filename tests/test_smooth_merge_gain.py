@@ -14,14 +14,13 @@ after that."""
 
 from __future__ import annotations
 
-import copy
-
 import numpy as np
 import pytest
 from _rally import rally
+from _stages import first_arguments
 
 from pslog import apply_timing, builtin_rig
-from pslog.estimation import SmoothOptions, fit_trajectory, trajectory
+from pslog.estimation import trajectory
 from pslog.records import NS
 from pslog.simulation import SimulationOptions, simulate
 
@@ -37,19 +36,7 @@ def refine_arguments():
     motion, kicks = rally(8.0, seed=SEED, speed=4.0 + SEED % 3, kick_every_s=0.9)
     detections, _ = simulate(rig, motion, 8.0, SimulationOptions(
         noise_px=0.3, seed=SEED, miss_rate=0.1, drop_rate=0.05))
-    seen = []
-    real = trajectory._refine_breaks
-
-    def capture(*args):
-        seen.append(copy.deepcopy(args))
-        return real(*args)
-
-    trajectory._refine_breaks = capture  # (the real refine, its arguments kept)
-    try:
-        fit_trajectory(detections.best(), rig, SmoothOptions())
-    finally:
-        trajectory._refine_breaks = real
-    return seen[0], np.asarray(kicks)
+    return first_arguments("_refine_breaks", detections.best(), rig), np.asarray(kicks)
 
 
 def test_of_two_breaks_refined_into_one_span_the_one_that_gains_more_stays(refine_arguments):

@@ -8,13 +8,12 @@ first left in place by a fraction of a microsecond)."""
 
 from __future__ import annotations
 
-import copy
-
 import numpy as np
 import pytest
+from _stages import first_arguments
 
 from pslog import SimulationOptions, apply_timing, builtin_rig, simulate
-from pslog.estimation import SmoothOptions, fit_trajectory, trajectory
+from pslog.estimation import trajectory
 from pslog.motion import rally_motion
 from pslog.timing import observations
 
@@ -26,19 +25,7 @@ def refine_arguments():
     rig = apply_timing(builtin_rig("paper3"), "typeA")
     detections, _ = simulate(rig, rally_motion(seed=5, duration=20.0), 20.0,
                              SimulationOptions(noise_px=0.3, seed=3))
-    seen = []
-    real = trajectory._refine_breaks
-
-    def capture(*args):
-        seen.append(copy.deepcopy(args))
-        return real(*args)
-
-    trajectory._refine_breaks = capture  # (the real refine, its arguments kept)
-    try:
-        fit_trajectory(observations(detections, rig), rig, SmoothOptions())
-    finally:
-        trajectory._refine_breaks = real
-    return seen[0]
+    return first_arguments("_refine_breaks", observations(detections, rig), rig)
 
 
 def _moved(new: np.ndarray, old: np.ndarray) -> np.ndarray:
