@@ -21,9 +21,9 @@ pieces (never inside a gap the model does not bridge). Per-point quality:
   blob kept where the ball was out of its view: docs/methods.md, "``smooth``'s rejected
   detections");
 - withheld where the fit is contradicted (``Track.dropped["contradicted_run"]``): a run of
-  consecutive detections the fit rejected, from two cameras or more, is the ball where the
-  fit is not (a kick it missed); no point between the fitted detections around the run
-  (:func:`contradicted_spans`);
+  consecutive capture times at which the fit rejected every detection, from two cameras or
+  more, is the ball where the fit is not (a kick it missed); no point between the fitted
+  times around the run (:func:`contradicted_spans`);
 - ``gap_s``: the largest time gap bridged: the longest interval between consecutive fitted
   detections (any camera; not those the fit rejected) that touches the point (at a
   detection, the longer of the intervals before and after it; on a grid point and at a
@@ -152,10 +152,12 @@ def contradicted_spans(time_ns: np.ndarray, camera: np.ndarray, used: np.ndarray
     accepted[group[~flag]] = True
     edges = np.diff(np.r_[0, (~accepted).astype(np.int8), 0])
     starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)  # [start, end)
+    first = np.searchsorted(group, starts)  # (the rows are in time order: each run's rows
+    last = np.searchsorted(group, ends)  # are one slice, [first, last))
     out = []
-    for a, b in zip(starts.tolist(), ends.tolist(), strict=True):
-        inside = (group >= a) & (group < b)
-        if len(np.unique(cam[inside])) < 2:
+    for a, b, i, j in zip(starts.tolist(), ends.tolist(), first.tolist(), last.tolist(),
+                          strict=True):
+        if np.all(cam[i:j] == cam[i]):  # one camera's run
             continue
         out.append((times[a - 1] if a > 0 else times[a] - 1,
                     times[b] if b < len(times) else times[b - 1] + 1))
