@@ -13,9 +13,11 @@ from __future__ import annotations
 
 import contextlib
 import os
+import shutil
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -42,8 +44,12 @@ def _killed(args: list, out: Path, tries: int = 6) -> int:
     under way). Returns the killed process's pid."""
     partial = out.with_name(out.name + ".partial")
     for _ in range(tries):
+        # its temporary files in a folder of the test's (a killed run cannot remove its own:
+        # the .rrd writer's named pipe stayed in /tmp after every test run)
+        scratch = tempfile.mkdtemp(prefix="pslog-killed-")
         proc = subprocess.Popen([sys.executable, "-m", "pslog.cli", *map(str, args)],
-                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                                env={**os.environ, "TMPDIR": scratch})
         try:
             deadline = time.monotonic() + 120
             while proc.poll() is None and time.monotonic() < deadline:
@@ -54,6 +60,7 @@ def _killed(args: list, out: Path, tries: int = 6) -> int:
             proc.send_signal(signal.SIGKILL)
         finally:
             proc.wait()
+            shutil.rmtree(scratch, ignore_errors=True)
         if proc.returncode == -signal.SIGKILL and partial.exists():
             return proc.pid
         out.write_bytes(OLD)  # it finished first: again
