@@ -90,7 +90,7 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-from _rally import rally  # noqa: E402
+from _rally import dirty_rally, rally  # noqa: E402
 from _rigs import lab3_rig as lab_rig  # noqa: E402  (three 800 x 600 cameras, wide lens)
 from _rigs import ring_rig  # noqa: E402
 
@@ -141,7 +141,7 @@ def more_sessions(n_seeds: int, duration: float, first_seed: int = 300):
     out = []
     for k in range(n_seeds):
         seed = first_seed + k
-        motion, kicks = rally(duration, seed=seed, speed=4.0 + seed % 3, kick_every_s=0.9)
+        motion, kicks = dirty_rally(seed, duration)
         out.append((f"rally-{seed}", motion, duration, np.asarray(kicks)))
     out.append(("library rally", rally_motion(5 + first_seed - 300, duration), duration, None))
     for name in ("straight", "turntable"):

@@ -10,7 +10,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from _rally import rally
+from _rally import dirty_rally
 from _rigs import ring_rig
 from numpy.testing import assert_allclose, assert_array_equal
 
@@ -148,7 +148,7 @@ def object_on_the_line():
     point known at its pixel (``gating._borrowed_tolerance``): rejected, nothing in doubt."""
     rig = apply_timing(builtin_rig("paper2"), "typeA")
     seed = 401
-    motion, _ = rally(8.0, seed=seed, speed=4.0 + seed % 3, kick_every_s=0.9)
+    motion, _ = dirty_rally(seed)
     det, truth, _ = simulate_labelled(rig, motion, 8.0, SimulationOptions(
         noise_px=0.3, seed=101, spurious_rate=0.05,
         distractors=((rig.names[1], (1.0, 1.5, 0.2)),),

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from _rally import rally
+from _rally import dirty_rally, rally
 from _rigs import ring_rig
 from numpy.testing import assert_array_equal
 from test_gating import DISTRACTOR
@@ -43,12 +43,12 @@ def _session(case: str):
         at = 2.122
     elif case == "lab4":  # rally 400, lab4-3 blind from 2.0 s, a kick at 2.145 s
         rig = ring_rig(4, "lab4")
-        motion = rally(8.0, seed=400, speed=4.0 + 400 % 3, kick_every_s=0.9)[0]
+        motion = dirty_rally(400)[0]
         faults = (("lab4-1", DISTRACTOR),), ("lab4-3", 2.0, 0.5), 100
         at = 2.158
     elif case == "lab4-2001":  # --first-seed 2000's rally 2001, lab4-4 blind 2.1-2.6 s
         rig = ring_rig(4, "lab4")
-        motion = rally(8.0, seed=2001, speed=4.0 + 2001 % 3, kick_every_s=0.9)[0]
+        motion = dirty_rally(2001)[0]
         faults = (("lab4-2", DISTRACTOR),), ("lab4-4", 2.1, 0.5), 1701
         at = 2.4083
     else:  # wide3, the library's rally (seed 105), wide3-1 blind 2.3-2.8 s

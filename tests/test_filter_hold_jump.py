@@ -15,7 +15,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
-from _rally import rally
+from _rally import dirty_rally
 
 from pslog import SimulationOptions, apply_timing, builtin_rig
 from pslog.evaluation import errors_m
@@ -30,7 +30,7 @@ def _session():
     clean: the kick at 5.340 s towards camera 1, whose next pixel (5.350 s, NIS 7.0) the
     filter put 60 mm off with std_m 5.3 mm before session 31."""
     rig = apply_timing(builtin_rig("paper2"), "typeA")
-    motion, _ = rally(8.0, seed=27400, speed=4.0 + 27400 % 3, kick_every_s=0.9)
+    motion, _ = dirty_rally(27400)
     options = SimulationOptions(noise_px=0.3, seed=27100)
     detections, truth = simulate(rig, motion, 8.0, options)
     obs = corrected_observations(detections, true_rig(rig, options))

@@ -16,7 +16,7 @@ import math
 
 import numpy as np
 import pytest
-from _rally import rally
+from _rally import dirty_rally
 from _rigs import ring_rig
 
 from pslog import SimulationOptions, apply_timing, builtin_rig
@@ -104,7 +104,7 @@ def test_a_blob_on_a_lone_cameras_epipolar_line_does_not_start_a_path_a_metre_of
     # the held-out session (lab4, rally-72407 of bench_dirty's --more at 0.3 px, its faults)
     rig = ring_rig(4, "lab4")
     seed = 72407
-    motion, _ = rally(8.0, seed=seed, speed=4.0 + seed % 3, kick_every_s=0.9)
+    motion, _ = dirty_rally(seed)
     options = SimulationOptions(noise_px=0.3, seed=seed - 300, spurious_rate=0.05,
                                 distractors=(("lab4-4", (1.0, 1.5, 0.2)),),
                                 blackouts=(("lab4-3", 2.7, 0.5),))

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from _rally import rally
+from _rally import dirty_rally, rally
 from numpy.testing import assert_array_equal
 from test_gate_whole import decided
 from test_stream_gating import assert_same_track, push_frames
@@ -41,7 +41,7 @@ OBJECT = (1.0, 1.5, 0.2)
 def session():
     """(detections, truth, ball labels): the held-out rally with spurious blobs in 5 % of the
     frames and the static object seen by ``cam2``."""
-    motion = rally(8.0, seed=72307, speed=5.0, kick_every_s=0.9)[0]
+    motion = dirty_rally(72307)[0]
     options = SimulationOptions(noise_px=0.3, seed=72007, spurious_rate=0.05,
                                 distractors=(("cam2", OBJECT),))
     return simulate_labelled(RIG, motion, 8.0, options)

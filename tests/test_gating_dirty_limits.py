@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from _rally import rally
+from _rally import dirty_rally, rally
 from _rigs import lab3_rig
 from numpy.testing import assert_array_equal
 from test_gating import DISTRACTOR, _push_frames
@@ -23,7 +23,7 @@ from pslog.simulation import SimulationOptions, ball_mask, simulate_labelled
 def _session(rig, rally_seed: int, sim_seed: int, distractor_cam: str, blind: tuple):
     """bench_dirty.py --more's session: the tests' rally ``rally_seed`` (8 s), 0.3 px, its
     faults (the object seen by ``distractor_cam``, ``blind`` = (camera, start, length))."""
-    motion = rally(8.0, seed=rally_seed, speed=4.0 + rally_seed % 3, kick_every_s=0.9)[0]
+    motion = dirty_rally(rally_seed)[0]
     options = SimulationOptions(noise_px=0.3, seed=sim_seed, spurious_rate=0.05,
                                 distractors=((distractor_cam, DISTRACTOR),), blackouts=(blind,))
     return simulate_labelled(rig, motion, 8.0, options)

@@ -10,7 +10,7 @@ streams equal the batch in both push forms."""
 from __future__ import annotations
 
 import numpy as np
-from _rally import rally
+from _rally import dirty_rally
 from test_gate_kernel import streamed
 from test_gating import DISTRACTOR
 from test_gating_contested import _contested, frames_between
@@ -42,7 +42,7 @@ def _rally_start(seed: int, sim_seed: int, seen_by: str, blind: str, blind_at: f
     base = apply_timing(builtin_rig("paper2"), "typeA")
     rig = Rig(tuple(c.replace(fps=60.0, offset=c.offset * c.fps / 60.0) for c in base.cameras),
               "paper2@60")
-    motion = rally(8.0, seed=seed, speed=4.0 + seed % 3, kick_every_s=0.9)[0]
+    motion = dirty_rally(seed)[0]
     full, truth, ball = simulate_labelled(rig, motion, 8.0, SimulationOptions(
         noise_px=0.3, seed=sim_seed, miss_rate=0.1, drop_rate=0.05, spurious_rate=0.05,
         distractors=((seen_by, DISTRACTOR),), blackouts=((blind, blind_at, 0.5),)))

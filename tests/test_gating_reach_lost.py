@@ -14,7 +14,7 @@ same choice there)."""
 from __future__ import annotations
 
 import numpy as np
-from _rally import rally
+from _rally import dirty_rally
 from test_gate_kernel import assert_same_stream
 from test_gating import DISTRACTOR
 from test_gating_contested import frames_between
@@ -34,7 +34,7 @@ def _session():
     rally-38600 with bench_dirty's faults (cam3 sees the object, cam2 blind 2.0-2.5 s),
     10 % misses, 5 % drops, 0.3 px."""
     rig = apply_timing(builtin_rig("paper3"), "typeA")
-    motion = rally(8.0, seed=38600, speed=4.0 + 38600 % 3, kick_every_s=0.9)[0]
+    motion = dirty_rally(38600)[0]
     full, truth, ball = simulate_labelled(rig, motion, 8.0, SimulationOptions(
         noise_px=0.3, seed=38300, miss_rate=0.1, drop_rate=0.05, spurious_rate=0.05,
         distractors=(("cam3", DISTRACTOR),), blackouts=(("cam2", 2.0, 0.5),)))
@@ -85,7 +85,7 @@ def test_a_lone_pairs_point_does_not_veto_the_reacquired_ball():
     ball's detections at 2.517-2.650 s, back in both cameras, are kept by the offline gate
     (reaching from every newest point once the track had predicted rejected all nine)."""
     base = apply_timing(builtin_rig("paper2"), "typeA")
-    motion = rally(8.0, seed=38800, speed=4.0 + 38800 % 3, kick_every_s=0.9)[0]
+    motion = dirty_rally(38800)[0]
     full, _, ball = simulate_labelled(base, motion, 8.0, SimulationOptions(
         noise_px=0.3, seed=38500, spurious_rate=0.05,
         distractors=(("cam1", DISTRACTOR),), blackouts=(("cam2", 2.0, 0.5),)))
@@ -110,7 +110,7 @@ def test_a_run_of_two_support_points_vouches_for_the_newest():
     point 2.76 m from the ball at 4.2 s, out of its reach): refused in both forms, the
     stream gate's two forms equal. (Without the path's vouch the causal gate keeps it.)"""
     rig = apply_timing(builtin_rig("paper3"), "typeA")
-    motion = rally(8.0, seed=38600, speed=4.0 + 38600 % 3, kick_every_s=0.9)[0]
+    motion = dirty_rally(38600)[0]
     full, truth, _ = simulate_labelled(rig, motion, 8.0, SimulationOptions(
         noise_px=0.3, seed=38300, blackouts=(("cam2", 4.199, 1.0), ("cam3", 4.199, 1.0))))
     t = full.frame_time_ns / 1e9

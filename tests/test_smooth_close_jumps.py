@@ -12,7 +12,7 @@ jump at spacings of 54–56 ms here)."""
 from __future__ import annotations
 
 import numpy as np
-from _rally import rally
+from _rally import dirty_rally
 
 from pslog import apply_timing, builtin_rig
 from pslog.estimation import SmoothOptions, fit_trajectory
@@ -25,7 +25,7 @@ def _session() -> tuple[Observations, np.ndarray]:
     """Two cameras (``paper2``) on 1.2 s of a test rally around its bounce and kick 80 ms
     apart (``bench_dirty.py --more --first-seed 4800``'s rally-4801, 0.3 px)."""
     rig = apply_timing(builtin_rig("paper2"), "typeA")
-    motion, kicks = rally(8.0, seed=4801, speed=4.0 + 4801 % 3, kick_every_s=0.9)
+    motion, kicks = dirty_rally(4801)
     detections, _ = simulate(rig, motion, 8.0, SimulationOptions(noise_px=0.3, seed=4501))
     obs = detections.best()
     inside = (obs.time_ns >= 3.7 * NS) & (obs.time_ns < 4.9 * NS)

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from _rally import rally
+from _rally import dirty_rally
 from _stages import first_arguments
 
 from pslog import apply_timing, builtin_rig
@@ -29,7 +29,7 @@ def confirm_arguments():
     """The arguments ``fit_trajectory`` gives ``_confirmed_breaks`` first on an 8-second
     rally of ``paper2`` with misses (a copy), and the rally's kicks (s)."""
     rig = apply_timing(builtin_rig("paper2"), "typeA")
-    motion, kicks = rally(8.0, seed=SEED, speed=4.0 + SEED % 3, kick_every_s=0.9)
+    motion, kicks = dirty_rally(SEED)
     detections, _ = simulate(rig, motion, 8.0, SimulationOptions(
         noise_px=0.3, seed=SEED, miss_rate=0.1, drop_rate=0.05))
     return first_arguments("_confirmed_breaks", detections.best(), rig), np.asarray(kicks)

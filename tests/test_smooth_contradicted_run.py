@@ -14,7 +14,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from _rally import rally
+from _rally import dirty_rally
 from _rigs import ring_rig
 
 from pslog import Rig
@@ -75,7 +75,7 @@ def _wide3_120() -> Rig:
 def session():
     rig = _wide3_120()
     seed = 74501
-    motion, kicks = rally(8.0, seed=seed, speed=4.0 + seed % 3, kick_every_s=0.9)
+    motion, kicks = dirty_rally(seed)
     options = SimulationOptions(noise_px=0.3, seed=seed - 300, spurious_rate=0.05,
                                 distractors=(("wide3-3", (1.0, 1.5, 0.2)),),
                                 blackouts=(("wide3-2", 2.1, 0.5),))

@@ -19,7 +19,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
-from _rally import rally
+from _rally import dirty_rally
 from numpy.testing import assert_allclose, assert_array_equal
 
 from pslog.estimation.trajectory import deletion_gain
@@ -67,7 +67,7 @@ def test_deletion_gain_is_the_cost_drop_of_leaving_the_detection_out():
 def _wide3_rally():
     """bench_dirty's wide3 rally-46100 at 0.3 px without faults (simulation seed 45800)."""
     rig = _rig("wide3")
-    motion, _ = rally(8.0, seed=46100, speed=4.0 + 46100 % 3, kick_every_s=0.9)
+    motion, _ = dirty_rally(46100)
     detections, truth = simulate(rig, motion, 8.0, SimulationOptions(noise_px=0.3, seed=45800))
     return rig, detections, truth
 

@@ -13,7 +13,7 @@ determine (``trajectory._underdetermined_ends``). Fails without the rule (run: 1
 from __future__ import annotations
 
 import numpy as np
-from _rally import rally
+from _rally import dirty_rally
 from _rigs import ring_rig
 
 from pslog.estimation import SmoothOptions, fit_trajectory
@@ -29,7 +29,7 @@ KICK_S, LAST_S = 2.2033, 2.2222
 def _fit(lo: float, hi: float):
     """The fit of the held-out session's ball detections in ``[lo, hi)`` s (0.3 px), the
     observations and the truth at them."""
-    motion, _ = rally(8.0, seed=13600, speed=4.0 + 13600 % 3, kick_every_s=0.9)
+    motion, _ = dirty_rally(13600)
     detections, _ = simulate(RIG, motion, 8.0, SimulationOptions(noise_px=0.3, seed=13300))
     obs = detections.best()
     inside = ((obs.time_ns >= lo * NS) & (obs.time_ns < hi * NS)

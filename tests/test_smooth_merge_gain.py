@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from _rally import rally
+from _rally import dirty_rally
 from _stages import first_arguments
 
 from pslog import apply_timing, builtin_rig
@@ -33,7 +33,7 @@ def refine_arguments():
     ``paper3`` with 10 % of the detections missed (a copy: the fit goes on with its problem
     afterwards), and the rally's kicks (s)."""
     rig = apply_timing(builtin_rig("paper3"), "typeA")
-    motion, kicks = rally(8.0, seed=SEED, speed=4.0 + SEED % 3, kick_every_s=0.9)
+    motion, kicks = dirty_rally(SEED)
     detections, _ = simulate(rig, motion, 8.0, SimulationOptions(
         noise_px=0.3, seed=SEED, miss_rate=0.1, drop_rate=0.05))
     return first_arguments("_refine_breaks", detections.best(), rig), np.asarray(kicks)

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from _rally import rally
+from _rally import dirty_rally, rally
 from _rigs import lab3_rig
 from _rrd import batch_column, capture_times, temporal_chunks
 from numpy.testing import assert_array_equal
@@ -40,7 +40,7 @@ def _issue_session():
     """bench_dirty's lab3 rally-302 with its faults (spurious blobs in 5 % of frames, the
     static object seen by lab3, lab1 blind 2.2-2.7 s), 0.3 px, simulation seed 2."""
     rig = lab3_rig()
-    motion, _ = rally(8.0, seed=302, speed=4.0 + 302 % 3, kick_every_s=0.9)
+    motion, _ = dirty_rally(302)
     options = SimulationOptions(noise_px=0.3, seed=2, spurious_rate=0.05,
                                 distractors=(("lab3", DISTRACTOR),),
                                 blackouts=(("lab1", 2.2, 0.5),))

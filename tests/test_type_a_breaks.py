@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from _rally import rally
+from _rally import dirty_rally, rally
 from _rigs import ring_rig
 from numpy.testing import assert_array_equal
 
@@ -28,7 +28,7 @@ BREAKS = FusionOptions(confirm_every=True, confirm_sides=True, confirm_breaks=Tr
 def _session(seed: int = 46000):
     """bench_dirty ``--more``'s rally ``seed`` on lab4 (its noise draw ``seed - 300``)."""
     rig = ring_rig(4, "lab4")
-    motion, kicks = rally(8.0, seed=seed, speed=4.0 + seed % 3, kick_every_s=0.9)
+    motion, kicks = dirty_rally(seed)
     det, truth = simulate_session(rig, motion, seed)
     return rig, det, truth, np.asarray(kicks)
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from _rally import rally
+from _rally import dirty_rally
 from numpy.testing import assert_array_equal
 
 from pslog.errors import FusionError
@@ -36,7 +36,7 @@ def _paper_default(monkeypatch):
 
 def _session(seed: int):
     rig = apply_timing(builtin_rig("paper3"), "typeA")
-    motion, kicks = rally(8.0, seed=seed, speed=4.0 + seed % 3, kick_every_s=0.9)
+    motion, kicks = dirty_rally(seed)
     det, truth = simulate(rig, motion, 8.0, SimulationOptions(noise_px=0.3, seed=seed))[:2]
     return rig, det, truth, np.asarray(kicks)
 

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from _rally import rally
+from _rally import dirty_rally
 from numpy.testing import assert_array_equal
 from test_stream_type_a import assert_same, pushed_one_by_one
 
@@ -36,7 +36,7 @@ FAR_S, KICK_S = 4.8333, 4.8235
 
 def _session(seed: int = 300, miss_rate: float = 0.0):
     rig = apply_timing(builtin_rig("paper3"), "typeA")
-    motion, kicks = rally(8.0, seed=seed, speed=4.0 + seed % 3, kick_every_s=0.9)
+    motion, kicks = dirty_rally(seed)
     det, truth = simulate(rig, motion, 8.0, SimulationOptions(
         noise_px=0.3, seed=seed, miss_rate=miss_rate, drop_rate=miss_rate / 2))[:2]
     return rig, det, truth, np.asarray(kicks)
