@@ -64,16 +64,12 @@ def fuse_smooth(prep: Prepared, rig: Rig, options) -> Track:
         return _empty()
     rejected_all = fit.rejected  # (n,) the detections the fit rejected (Fit.rejected)
     spans = contradicted_spans(obs.time_ns, obs.camera, fit.used, rejected_all)
-    n_contradicted = 0
     if options.rate_hz is None:
         # the points with a finite position, gathered once (the covariances of a 90-minute
         # session are 35 MB: gathered and then filtered, they were copied twice); none
         # gathered when every observation has one (the fit's arrays are the track's)
         keep = fit.used & np.all(np.isfinite(fit.position), axis=1)
-        if len(spans):
-            inside = _inside_spans(obs.time_ns, spans)
-            n_contradicted = int(np.count_nonzero(keep & inside))
-            keep &= ~inside
+        n_contradicted = _leave_out_spans(obs.time_ns, keep, spans)
         rejected = rejected_all
         if np.all(keep):
             time_ns, camera = obs.time_ns, obs.camera
@@ -94,10 +90,7 @@ def fuse_smooth(prep: Prepared, rig: Rig, options) -> Track:
         closer = np.abs(obs.time_ns[before] - time_ns) < np.abs(obs.time_ns[near] - time_ns)
         camera = obs.camera[np.where(closer, before, near)]
         keep = np.all(np.isfinite(position), axis=1)
-        if len(spans):
-            inside = _inside_spans(time_ns, spans)
-            n_contradicted = int(np.count_nonzero(keep & inside))
-            keep &= ~inside
+        n_contradicted = _leave_out_spans(time_ns, keep, spans)
         time_ns, camera, position = time_ns[keep], camera[keep], position[keep]
         cov, residual = cov[keep], residual[keep]
         flag = np.full(len(time_ns), np.nan)  # a grid point is no detection
@@ -146,8 +139,10 @@ def contradicted_spans(time_ns: np.ndarray, camera: np.ndarray, used: np.ndarray
     if not flag.any():
         return np.zeros((0, 2), np.int64)
     t, cam = time_ns[rows], np.asarray(camera)[rows]
-    # the fitted capture times, each rejected when every detection at it is
-    times, group = np.unique(t, return_inverse=True)
+    # the fitted capture times (t sorted: each a run of equal values), each rejected when
+    # every detection at it is
+    new = np.r_[True, t[1:] != t[:-1]]
+    times, group = t[new], np.cumsum(new) - 1
     accepted = np.zeros(len(times), bool)
     accepted[group[~flag]] = True
     edges = np.diff(np.r_[0, (~accepted).astype(np.int8), 0])
@@ -164,13 +159,18 @@ def contradicted_spans(time_ns: np.ndarray, camera: np.ndarray, used: np.ndarray
     return np.array(out, np.int64).reshape(-1, 2)
 
 
-def _inside_spans(time_ns: np.ndarray, spans: np.ndarray) -> np.ndarray:
-    """(n,) bool: the times strictly inside one of the open intervals ``spans`` (k, 2),
-    sorted and disjoint."""
+def _leave_out_spans(time_ns: np.ndarray, keep: np.ndarray, spans: np.ndarray) -> int:
+    """Clear ``keep`` (n,) bool in place at the times ``time_ns`` (n,) strictly inside one
+    of the open intervals ``spans`` (k, 2), sorted and disjoint; returns how many kept
+    points that left out."""
+    if not len(spans):
+        return 0
     j = np.searchsorted(spans[:, 0], time_ns, side="left") - 1  # the span starting before
-    ok = j >= 0
     jj = np.maximum(j, 0)
-    return ok & (time_ns > spans[jj, 0]) & (time_ns < spans[jj, 1])
+    inside = (j >= 0) & (time_ns > spans[jj, 0]) & (time_ns < spans[jj, 1])
+    n = int(np.count_nonzero(keep & inside))
+    keep &= ~inside
+    return n
 
 
 def session_fit(prep: Prepared, rig: Rig, options):
