@@ -30,7 +30,7 @@ import threading
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from functools import partial
-from typing import Literal, cast
+from typing import TYPE_CHECKING, Literal, cast
 
 import numpy as np
 
@@ -44,6 +44,9 @@ from ._prepare import Prepared, default_max_gap_s, prepare
 from .prediction import fuse_predicted
 from .pseudo import PseudoStereoPoints, TypeAConstruction, fuse_type_a, pseudo_stereo_points
 from .stereo import Drops, fuse_nearest, fuse_sync, sync_groups
+
+if TYPE_CHECKING:
+    from .breaks import SessionFit
 
 #: The filter's hold for the next camera by default (``FilterOptions.hold_nis``,
 #: ``FusionOptions.filter_hold_nis``): a plain update's point whose NIS exceeds χ²₂'s mean
@@ -121,11 +124,13 @@ class FusionOptions:
         default): on where :func:`for_session` turns ``confirm_every`` on from None, off
         otherwise (``confirm_every=True`` alone: ``--confirm-gaps all`` everywhere)
     confirm_breaks : bool, typeA, offline only, with ``confirm_sides``: a point whose
-        construction spans a velocity break of ``smooth``'s fit of the same observations is
-        replaced by type A's point on the same detection made from the time-reversed
-        observations (the backward pass) when that construction spans no break, and
-        withheld (``break`` in ``Track.dropped``) otherwise; the other points unchanged, to
-        the bit (:mod:`pslog.fusion.breaks`; ``pslog fuse --confirm-gaps breaks``;
+        construction spans a velocity break of ``smooth``'s fit of the session (of
+        ``smooth``'s own input: the detections as its offline gate chooses them; one fit
+        shared with ``smooth`` when both are fused, :class:`pslog.fusion.breaks.SessionFit`;
+        session 44) is replaced by type A's point on the same detection made from the
+        time-reversed observations (the backward pass) when that construction spans no
+        break, and withheld (``break`` in ``Track.dropped``) otherwise; the other points
+        unchanged, to the bit (:mod:`pslog.fusion.breaks`; ``pslog fuse --confirm-gaps breaks``;
         docs/methods.md, "Type A across a break: the backward pass (session 37)"). Default
         False
     max_std_m : float or None, typeA: a point whose ``std_m`` exceeds this is withheld
@@ -350,9 +355,10 @@ def _nearest(prep: Prepared, rig: Rig, options: FusionOptions, *, drops: Drops |
 
 
 def _type_a(prep: Prepared, rig: Rig, options: FusionOptions, *,
-            breaks_ns: np.ndarray | None = None) -> Track:
-    """Type A's offline track (``breaks_ns``: ``confirm_breaks``' breaks of the session's
-    fit, given; None: fitted here, :func:`pslog.fusion.breaks.fit_breaks_ns`)."""
+            breaks_ns: np.ndarray | Callable[[], np.ndarray] | None = None) -> Track:
+    """Type A's offline track (``breaks_ns``: ``confirm_breaks``' breaks of ``smooth``'s
+    fit of the session, given or a callable giving them; None: the fit of ``prep``,
+    :func:`pslog.fusion.breaks.fit_breaks_ns`)."""
     from ._prepare import rays_only
     from .confirm import confirm_batch  # (long-gap points confirmed by the next camera)
     from .pseudo import _fuse_type_a, covariance_noise_px, type_a_noise, withhold_uncertain
@@ -420,10 +426,13 @@ def _filter_stream(rig: Rig, options: FusionOptions):
     return FilterStream(rig, options)
 
 
-def _smooth(prep: Prepared, rig: Rig, options: FusionOptions) -> Track:
+def _smooth(prep: Prepared, rig: Rig, options: FusionOptions, *,
+            fitted: Callable[[], tuple] | None = None) -> Track:
+    """``smooth``'s track (``fitted``: its session fit made once, shared with type A's
+    ``confirm_breaks``, :class:`pslog.fusion.breaks.SessionFit`'s ``fitted``)."""
     from .smooth import fuse_smooth  # scipy is imported only when smooth runs
 
-    return fuse_smooth(prep, rig, options)
+    return fuse_smooth(prep, rig, options, None if fitted is None else fitted())
 
 
 _PAPER = "Fujiyoshi et al., RoboCup 2004"
@@ -599,6 +608,7 @@ def default_methods(
 def fuse(
     observations: Observations | Detections, rig: Rig, method: str,
     options: FusionOptions | None = None, *, prepared: Prepared | None = None,
+    smooth_fit: SessionFit | None = None,
 ) -> Track:
     """Fuse one session's detections into a 3D track.
 
@@ -612,6 +622,12 @@ def fuse(
     method : one of :data:`METHODS`
     options : FusionOptions
     prepared : the result of :func:`prepare` for these observations, to share between methods
+    smooth_fit : :class:`pslog.fusion.breaks.SessionFit` of ``smooth``'s fit of this
+        session, to share between ``smooth`` (its track) and ``typeA`` with
+        ``confirm_breaks`` (its kick instants): fitted once (:func:`pslog.fusion.gating.
+        start_fusion`); None: ``smooth`` fits here, and typeA's ``confirm_breaks`` fits
+        ``smooth``'s input of these observations (Detections: gated as ``smooth`` gates
+        them), so its points are the same whether ``smooth`` is fused beside it or not
 
     Returns
     -------
@@ -621,6 +637,7 @@ def fuse(
     """
     check_method(method)
     options = options or FusionOptions()
+    given = observations
     if isinstance(observations, Detections):
         from .gating import gate_for, prepared_for
 
@@ -637,20 +654,44 @@ def fuse(
     prep = prepared if prepared is not None else prepare(observations, rig)
     resolved = replace(options, max_gap_s=options.max_gap_s or default_max_gap_s(rig))
     function = METHODS[method].function
-    if method == "typeA" and resolved.confirm_breaks and options.clock_covariance is not None:
-        # the breaks of the session's fit are a decision, taken as it was in the clocks'
-        # perturbed runs (pslog.fusion.clock): fitted once, not once per run (2 m + 1 fits
-        # of smooth for m clock directions otherwise)
-        from ._prepare import rays_only
-        from .breaks import fit_breaks_ns
-
-        function = partial(_type_a, breaks_ns=fit_breaks_ns(rays_only(prep)[0], rig, resolved))
+    if method == "smooth" and smooth_fit is not None:
+        function = partial(_smooth, fitted=smooth_fit.fitted)
+    elif method == "typeA" and resolved.confirm_breaks:
+        fit = (smooth_fit if smooth_fit is not None
+               else _smooth_fit_of(given, prep, rig, options, resolved))
+        # (called once the forward track is made: a fit made meanwhile is not waited for)
+        breaks: np.ndarray | Callable[[], np.ndarray] = fit.breaks_ns
+        if options.clock_covariance is not None:
+            # the breaks of the session's fit are a decision, taken as it was in the
+            # clocks' perturbed runs (pslog.fusion.clock): fitted once, not once per run
+            # (2 m + 1 fits of smooth for m clock directions otherwise)
+            breaks = fit.breaks_ns()
+        function = partial(_type_a, breaks_ns=breaks)
     track = function(prep, rig, resolved)
     if options.clock_covariance is not None and not METHODS[method].own_clock_consider:
         from .clock import with_clock_covariance
 
         track = with_clock_covariance(track, method, prep, rig, resolved, function)
     return track
+
+
+def _smooth_fit_of(observations: Observations | Detections, prep: Prepared, rig: Rig,
+                   options: FusionOptions, resolved: FusionOptions):
+    """The :class:`~pslog.fusion.breaks.SessionFit` of ``smooth``'s input of a session that
+    :func:`fuse` fuses with typeA's ``confirm_breaks`` alone: Detections gated as ``smooth``
+    gates them (with ``options.gating`` and two cameras or more; as :func:`fuse` gates),
+    else ``prep`` (every method's; ``resolved``: ``options`` with ``max_gap_s`` set). No
+    clocks' consider covariance: the breaks do not need it."""
+    from .breaks import SessionFit
+
+    fit_options = replace(resolved, clock_covariance=None)
+    if isinstance(observations, Detections) and options.gating and len(rig) >= 2:
+        from .gating import gate_for, prepared_for
+
+        detections = observations
+        return SessionFit(lambda: prepared_for(gate_for(detections, rig, "smooth", options),
+                                               rig), rig, fit_options)
+    return SessionFit(lambda: prep, rig, fit_options)
 
 
 def fuse_all(

@@ -6,7 +6,12 @@ comes from the motion before the kick (docs/methods.md, "Type A's last far point
 session's fit"). The same equations run on the time-reversed observations (the *backward
 pass*) take each detection's depth from the points after it: right just after a kick, wrong
 just before one. Which of the two holds needs the kick's instant, which ``smooth``'s fit of
-the same observations has (its velocity breaks, :attr:`pslog.estimation.Trajectory.breaks_s`).
+the session has (its velocity breaks, :attr:`pslog.estimation.Trajectory.breaks_s`): since
+session 44 the fit of ``smooth``'s own input (the detections as its offline gate chooses
+them, its rule for the choices in doubt), made once when both methods are fused
+(:class:`SessionFit`), so that type A's points do not depend on whether ``smooth`` is fused
+beside it; before, type A fitted its own causal gate's choices, a second whole fit in a
+default ``pslog fuse`` (docs/methods.md, "One fit for both (session 44)").
 
 With ``FusionOptions.confirm_breaks`` (``pslog fuse --confirm-gaps breaks``), a type A point
 whose construction spans a break (one in ``(t - span_s, t]``) is replaced by the backward
@@ -18,6 +23,7 @@ backward pass (session 37)".
 """
 from __future__ import annotations
 
+import threading
 from collections.abc import Callable
 from dataclasses import replace
 from typing import Any, Literal
@@ -31,22 +37,65 @@ from ._prepare import Prepared, prepare
 
 def fit_breaks_ns(prep: Prepared, rig: Rig, options) -> np.ndarray:
     """(k,) int64, sorted: the instants (ns) of the velocity breaks of ``smooth``'s fit of
-    ``prep``'s observations (the gate's choices in doubt left out); empty when no stretch
-    is seen by two cameras. ``options``: FusionOptions with ``max_gap_s`` set (the fit's;
-    the clocks' consider covariance is not needed for the breaks and not made)."""
-    from .smooth import _fit
+    ``prep``'s observations (:func:`pslog.fusion.smooth.session_fit`: its rule for the
+    gate's choices in doubt); empty when no stretch is seen by two cameras. ``options``:
+    FusionOptions with ``max_gap_s`` set (the fit's; the clocks' consider covariance is not
+    needed for the breaks, which it does not move, and not made)."""
+    return SessionFit(lambda: prep, rig, replace(options, clock_covariance=None)).breaks_ns()
 
-    obs = prep.obs
-    if prep.doubt_px2 is not None:
-        obs = obs.select(~(prep.doubt_px2 > 0))
-    if len(obs) < 2:
-        return np.zeros(0, np.int64)
-    fit = _fit(obs, rig, replace(options, clock_covariance=None))
+
+def session_breaks_ns(fit) -> np.ndarray:
+    """(k,) int64, sorted: the break instants (ns) of a ``smooth`` fit
+    (:class:`pslog.estimation.Fit`, or None: none)."""
     if fit is None:
         return np.zeros(0, np.int64)
     trajectory = fit.trajectory
     return np.sort(trajectory.t0_ns + np.round(np.asarray(trajectory.breaks_s) * 1e9
                                                ).astype(np.int64))
+
+
+class SessionFit:
+    """``smooth``'s fit of one session (:func:`pslog.fusion.smooth.session_fit` of the
+    prepared observations ``make_input()`` returns: ``smooth``'s own input, its gating form
+    and doubt), made once, by whichever asks first: ``smooth``'s fusion (its track) or type
+    A's ``confirm_breaks`` (the kick instants); a thread asking while it is made waits for
+    it. So a ``pslog fuse`` of both fits once, and type A's breaks are the same whether
+    ``smooth`` is fused beside it or not (its breaks do not depend on the clocks' consider
+    covariance that only ``smooth``'s own track needs). ``options``: FusionOptions with
+    ``max_gap_s`` set, ``smooth``'s."""
+
+    def __init__(self, make_input: Callable[[], Prepared], rig: Rig, options,
+                 uses: int = 1) -> None:
+        self._make_input: Callable[[], Prepared] | None = make_input
+        self._rig, self._options = rig, options
+        self._lock = threading.Lock()
+        self._value: tuple | None = None
+        self._uses = uses
+
+    def fitted(self) -> tuple:
+        """``session_fit``'s ``(fit or None, observations, n_doubt)``."""
+        from .smooth import session_fit
+
+        with self._lock:
+            if self._value is None:
+                if self._make_input is None:
+                    raise RuntimeError("SessionFit used after its last release")
+                self._value = session_fit(self._make_input(), self._rig, self._options)
+            return self._value
+
+    def release(self) -> bool:
+        """One of its ``uses`` done: after the last (True), the fit and its input are
+        dropped (a 90-minute match's fit holds hundreds of MB)."""
+        with self._lock:
+            self._uses -= 1
+            if self._uses <= 0:
+                self._value, self._make_input = None, None
+                return True
+            return False
+
+    def breaks_ns(self) -> np.ndarray:
+        """(k,) int64, sorted: the fit's break instants (:func:`session_breaks_ns`)."""
+        return session_breaks_ns(self.fitted()[0])
 
 
 def reversed_prepared(prep: Prepared, rig: Rig) -> tuple[Prepared, int]:
@@ -76,7 +125,7 @@ def spans_break(breaks_ns: np.ndarray, start_ns: np.ndarray, end_ns: np.ndarray,
 
 def across_breaks(prep: Prepared, track: Track, rig: Rig, options,
                   type_a: Callable[[Prepared, Rig, Any], Track],
-                  breaks_ns: np.ndarray | None = None) -> Track:
+                  breaks_ns: np.ndarray | Callable[[], np.ndarray] | None = None) -> Track:
     """``track`` (type A's from ``prep`` under ``options``, FusionOptions with ``max_gap_s``
     set) with each point spanning a break of the session's fit replaced by the backward
     pass's point on its detection, or withheld (``break``) when that one spans a break too or
@@ -84,10 +133,13 @@ def across_breaks(prep: Prepared, track: Track, rig: Rig, options,
     backward pass: ``options`` with ``confirm_breaks`` off). A replaced point takes every
     column of the backward point, its ``span_s`` negated (the point's time minus the latest
     capture it uses). The other points are ``track``'s rows, unchanged. ``breaks_ns``: the
-    fit's breaks (:func:`fit_breaks_ns` of ``prep``), given; None: fitted here."""
+    fit's breaks, given, or a callable that gives them (a :class:`SessionFit`'s ``breaks_ns``:
+    the fit of ``smooth``'s own input, called once the forward track is made); None: the fit
+    of ``prep`` (:func:`fit_breaks_ns`)."""
     if not len(track) or "span_s" not in track.quality:
         return track
-    breaks = fit_breaks_ns(prep, rig, options) if breaks_ns is None else breaks_ns
+    breaks = (fit_breaks_ns(prep, rig, options) if breaks_ns is None
+              else breaks_ns() if callable(breaks_ns) else breaks_ns)
     t = track.time_ns
     span = np.round(track.quality["span_s"] * 1e9).astype(np.int64)
     spanning = spans_break(breaks, t - span, t, forward=True)

@@ -68,7 +68,7 @@ import sys
 import threading
 from bisect import bisect_left, bisect_right
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from itertools import pairwise
 from typing import TYPE_CHECKING, Literal
 
@@ -3454,19 +3454,47 @@ def start_fusion(detections: Detections, rig: Rig, methods, options=None, *,
     for method in methods:
         check_method(method)
     workers = default_workers(len(methods)) if workers is None else workers
+    # type A's confirm_breaks takes its kick instants from smooth's fit of the session:
+    # made once, by smooth's fusion or type A's, whichever asks first (the other waits)
+    sharing = "typeA" in methods and options.confirm_breaks and len(rig) >= 2
+    fit_of: list = []  # [SessionFit] when sharing, given smooth's input's maker
+    made_input: dict = {}  # smooth's gated input when sharing (the fit's and smooth's)
+
+    def share_fit(make_input) -> None:
+        from . import default_max_gap_s
+        from .breaks import SessionFit
+
+        fit_options = replace(options, max_gap_s=options.max_gap_s or default_max_gap_s(rig))
+        if "smooth" not in methods:  # (only smooth's own track needs the clocks' consider)
+            fit_options = replace(fit_options, clock_covariance=None)
+        fit_of.append(SessionFit(make_input, rig, fit_options,
+                                 uses=1 + ("smooth" in methods)))
+
+    def fused_with_fit(method: str, observations, prep):
+        fit = fit_of[0] if fit_of and method in ("smooth", "typeA") else None
+        try:
+            return fuse(observations, rig, method, options, prepared=prep, smooth_fit=fit)
+        finally:
+            if fit is not None and fit.release():
+                made_input.clear()  # (its arrays go with the fit's last use)
+
     if not options.gating:
         obs = timed_observations(detections, rig)
         prep = prepare(obs, rig) if len(rig) >= 2 else None
+        if sharing:
+            share_fit(lambda: prep)
         shown = MethodProgress(methods)
         return FusionRun(methods, MethodRun(
             methods, [None] * len(methods), lambda key, method: prep,
-            lambda m, p: fuse(obs, rig, m, options, prepared=p), workers,
+            lambda m, p: fused_with_fit(m, obs, p), workers,
             started=shown.started, finished=shown.finished, background=background),
             gating=False)
 
     # the forms' shared part (gate_common) once, by the first form to start, dropped once
     # every form has it (the forms gate at once, on threads: the others wait for it)
-    forms = len({gating_key(method, options) for method in methods})
+    smooth_key = gating_key("smooth", options)
+    forms = len({gating_key(method, options) for method in methods}
+                | ({smooth_key} if sharing else set()))
     lock = threading.Lock()
     shared: dict = {}
 
@@ -3489,7 +3517,7 @@ def start_fusion(detections: Detections, rig: Rig, methods, options=None, *,
     # (the choices' doubt where a method of the form takes it in its covariance)
     # (a form's methods taking different doubts: every choice's, True, wins over "start")
     doubting: dict[tuple, bool | str] = {}
-    for m in methods:
+    for m in methods + (["smooth"] if sharing else []):
         if METHODS[m].uses_doubt:
             key = gating_key(m, options)
             doubting[key] = True if doubting.get(key) is True else METHODS[m].doubt
@@ -3505,14 +3533,27 @@ def start_fusion(detections: Detections, rig: Rig, methods, options=None, *,
                              doubting.get(key, False))
         return gated, (prepared_for(gated, rig) if len(rig) >= 2 else None)
 
+    input_lock = threading.Lock()
+
+    def method_input(key, method: str) -> tuple[Gated, Prepared | None]:
+        if not (sharing and key == smooth_key):
+            return gated_input(key, method)
+        with input_lock:  # smooth's input: also the shared fit's, made once
+            if "value" not in made_input:
+                made_input["value"] = gated_input(key, "smooth")
+            return made_input["value"]
+
+    if sharing:
+        share_fit(lambda: method_input(smooth_key, "smooth")[1])
+
     def fused(method: str, shared: tuple[Gated, Prepared | None]):
         gated, prep = shared
-        return fuse(gated.observations, rig, method, options, prepared=prep), gated.rejections
+        return fused_with_fit(method, gated.observations, prep), gated.rejections
 
     # the methods run at once on threads (pslog.fusion._parallel: same results, same errors)
     shown = MethodProgress(methods)
     return FusionRun(methods, MethodRun(
-        methods, [gating_key(method, options) for method in methods], gated_input, fused,
+        methods, [gating_key(method, options) for method in methods], method_input, fused,
         workers, started=shown.started, finished=shown.finished, background=background),
         gating=True)
 

@@ -56,10 +56,13 @@ from ..rig import Rig
 from ._prepare import Prepared
 
 
-def fuse_smooth(prep: Prepared, rig: Rig, options) -> Track:
+def fuse_smooth(prep: Prepared, rig: Rig, options, fitted: tuple | None = None) -> Track:
     """The ``smooth`` track of prepared observations (``options``: FusionOptions with
-    ``max_gap_s`` set). An empty track when no stretch is seen by two cameras."""
-    fit, obs, n_doubt = session_fit(prep, rig, options)
+    ``max_gap_s`` set). An empty track when no stretch is seen by two cameras.
+    ``fitted``: :func:`session_fit`'s result for the same arguments, made before (shared
+    with type A's ``confirm_breaks``, which reads its breaks: :mod:`pslog.fusion.breaks`);
+    None: fitted here."""
+    fit, obs, n_doubt = session_fit(prep, rig, options) if fitted is None else fitted
     if fit is None:
         return _empty()
     rejected_all = fit.rejected  # (n,) the detections the fit rejected (Fit.rejected)
