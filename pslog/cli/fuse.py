@@ -93,7 +93,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "candidate in the output; off: take each frame's best-scored "
                              "candidate (default %(default)s)")
     parser.add_argument("--confirm-gaps",  # CONFIRM_GAPS
-                        choices=("kicks", "breaks", "all", "on", "off"),
+                        choices=("kicks", "breaks", "jumps", "all", "on", "off"),
                         default=None,
                         help="typeA: kicks (the default): every point is tested against "
                              "every other camera's track around it, on the point's side of a "
@@ -104,7 +104,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "construction spans a velocity break of smooth's fit of the "
                              "session is replaced by type A's point from the detections after "
                              "it (time reversed) when that one spans none, else left out "
-                             "(break); all: every point tested against the next "
+                             "(break); jumps: breaks with the kick instants taken from the "
+                             "jumps each camera's image track shows instead of a fit (no "
+                             "smooth fit: cheaper); all: every point tested against the next "
                              "camera's interpolated track only; on: only a point whose "
                              "prediction bridged a gap longer than the rig's usual one, or "
                              "rests on a camera's first detection after a spell without one, "
@@ -143,6 +145,7 @@ def run(args: argparse.Namespace) -> int:
     from pslog._jit import preload
     from pslog.errors import FusionError, RigError, shell_word
     from pslog.fusion import (
+        CONFIRM_BREAK_SOURCE,
         CONFIRM_GAPS,
         FILTER_HOLD_NIS,
         METHODS,
@@ -190,13 +193,15 @@ def run(args: argparse.Namespace) -> int:
         check_tolerance(rig, tolerance_s)
     except FusionError as exc:
         return usage_error("fuse", f"argument --tolerance-ms: {exc}")
-    confirm = CONFIRM_GAPS[args.confirm_gaps or "kicks"]  # (None: not given; said if unused)
+    confirm_name = args.confirm_gaps or "kicks"  # (None: not given; said if unused)
+    confirm = CONFIRM_GAPS[confirm_name]
     options = FusionOptions(tolerance_s=tolerance_s,
                             max_gap_s=None if args.max_gap_ms is None else args.max_gap_ms / 1e3,
                             rate_hz=args.rate, noise_px=args.noise_px,
                             gating=args.gating == "on",
                             confirm_gaps=confirm[0], confirm_every=confirm[1],
                             confirm_sides=confirm[2], confirm_breaks=confirm[3],
+                            break_source=CONFIRM_BREAK_SOURCE.get(confirm_name, "fit"),
                             filter_hold_nis=FILTER_HOLD_NIS if args.filter_hold == "on"
                             else None,
                             max_std_m=None if args.type_a_max_std_mm is None
@@ -371,14 +376,14 @@ def run(args: argparse.Namespace) -> int:
               + (f"; {n_backward} {'points' if n_backward > 1 else 'point'} made from the "
                  "detections after "
                  + ("them" if n_backward > 1 else "it")
-                 + " (--confirm-gaps breaks: the paper's construction spanned a velocity "
-                 "break of smooth's fit; span_s < 0)" if n_backward else ""))
+                 + f" (--confirm-gaps {confirm_name}: the paper's construction spanned "
+                 f"{BREAK_WORDS[options.break_source]}; span_s < 0)" if n_backward else ""))
     if options.confirm_breaks and "typeA" in written:
         _, dropped, _, _, n_backward = written["typeA"]
         if not n_backward and not dropped.get("break"):
             # the option asked for and nothing to show for it: said, not left to be guessed
             # from a line like the default's (session 37's walk: --gating off)
-            print(NO_BREAK_SPANNED)
+            print(NO_BREAK_SPANNED[options.break_source])
     if frames is not None and lost:
         _say_clocks_apart(args, lost, int(np.count_nonzero(frames[1])))
     print(f"wrote {output}")
@@ -406,9 +411,16 @@ def _say_clocks_apart(args: argparse.Namespace, lost: dict[str, int], seen: int)
 #: ``--confirm-gaps breaks`` when no type A point spanned a velocity break of the session's
 #: fit (none replaced, none withheld): the fit found no break, or each lies where no point's
 #: construction reaches across it (the kink test left those out)
-NO_BREAK_SPANNED = ("typeA: --confirm-gaps breaks changed no point: none spanned a velocity "
-                    "break of smooth's fit (it found none, or none that a point's "
-                    "construction reaches across): every point is the paper's")
+NO_BREAK_SPANNED = {
+    "fit": ("typeA: --confirm-gaps breaks changed no point: none spanned a velocity break of "
+            "smooth's fit (it found none, or none that a point's construction reaches "
+            "across): every point is the paper's"),
+    "image": ("typeA: --confirm-gaps jumps changed no point: none spanned a kick the cameras' "
+              "images show (they show none, or none that a point's construction reaches "
+              "across): every point is the paper's")}
+#: what a replaced type A point's construction spanned, by ``FusionOptions.break_source``
+BREAK_WORDS = {"fit": "a velocity break of smooth's fit",
+               "image": "a kick the cameras' images show"}
 
 
 def _no_point(method: str, dropped: dict[str, int], max_std_mm: float | None,

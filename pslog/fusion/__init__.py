@@ -62,8 +62,13 @@ MAX_GAP_S = 3600.0
 #: (``confirm_gaps``, ``confirm_every``, ``confirm_sides``, ``confirm_breaks``)
 #: (:class:`FusionOptions`)
 CONFIRM_GAPS = {"kicks": (True, True, True, False), "breaks": (True, True, True, True),
-                "all": (True, True, False, False), "on": (True, False, False, False),
-                "off": (False, False, False, False)}
+                "jumps": (True, True, True, True), "all": (True, True, False, False),
+                "on": (True, False, False, False), "off": (False, False, False, False)}
+#: Where ``confirm_breaks`` takes its kick instants (``FusionOptions.break_source``): the
+#: first is the default
+BREAK_SOURCES = ("fit", "image")
+#: ``pslog fuse --confirm-gaps``'s choices whose break source is not the default
+CONFIRM_BREAK_SOURCE = {"jumps": "image"}
 
 
 @dataclass(frozen=True)
@@ -133,6 +138,11 @@ class FusionOptions:
         unchanged, to the bit (:mod:`pslog.fusion.breaks`; ``pslog fuse --confirm-gaps breaks``;
         docs/methods.md, "Type A across a break: the backward pass (session 37)"). Default
         False
+    break_source : str, typeA with ``confirm_breaks``: where the kick instants come from:
+        ``"fit"`` (the default), the velocity breaks of ``smooth``'s fit of the session;
+        ``"image"``, each camera's image track alone (:func:`pslog.fusion.breaks.
+        image_kicks_ns`: the jumps its detections show, no fit; ``pslog fuse --confirm-gaps
+        jumps``; docs/methods.md, "Kick instants from the images (session 44)")
     max_std_m : float or None, typeA: a point whose ``std_m`` exceeds this is withheld
         (counted in ``Track.dropped`` as ``uncertain``: the filter's rule;
         ``pslog.fusion.pseudo.MAX_STD_M`` is the filter's default, 5 cm / 1.96, issue 10's
@@ -171,6 +181,7 @@ class FusionOptions:
     confirm_every: bool | None = None
     confirm_sides: bool | None = None
     confirm_breaks: bool = False
+    break_source: str = "fit"
     max_std_m: float | None = None
     detector_offset_m: float | None = None
     detector_bias_px: float | None = None
@@ -192,6 +203,9 @@ class FusionOptions:
         if self.confirm_breaks and self.confirm_sides is False:
             raise FusionError("typeA's confirm_breaks needs confirm_sides (it replaces the "
                               "points the kick test keeps)")
+        if self.break_source not in BREAK_SOURCES:
+            raise FusionError(f"typeA's break source must be one of {', '.join(BREAK_SOURCES)}, "
+                              f"got {self.break_source!r}")
         if self.confirm_every and not self.confirm_gaps:
             raise FusionError("typeA's confirm_every needs confirm_gaps (it confirms every "
                               "point as confirm_gaps confirms the long-gap ones)")
@@ -379,8 +393,11 @@ def _type_a(prep: Prepared, rig: Rig, options: FusionOptions, *,
                                             table[0] if table and track is made else None),
                                options.max_std_m)[0]
     if options.confirm_breaks:
-        from .breaks import across_breaks
+        from .breaks import across_breaks, image_kicks_ns
 
+        if options.break_source == "image" and breaks_ns is None:
+            # (the forward track's points give the depths)
+            breaks_ns = image_kicks_ns(prep, track, rig, options)
         track = across_breaks(prep, track, rig, options, _type_a, breaks_ns)
     return track
 
@@ -656,7 +673,7 @@ def fuse(
     function = METHODS[method].function
     if method == "smooth" and smooth_fit is not None:
         function = partial(_smooth, fitted=smooth_fit.fitted)
-    elif method == "typeA" and resolved.confirm_breaks:
+    elif method == "typeA" and resolved.confirm_breaks and resolved.break_source == "fit":
         fit = (smooth_fit if smooth_fit is not None
                else _smooth_fit_of(given, prep, rig, options, resolved))
         # (called once the forward track is made: a fit made meanwhile is not waited for)
@@ -667,6 +684,15 @@ def fuse(
             # (2 m + 1 fits of smooth for m clock directions otherwise)
             breaks = fit.breaks_ns()
         function = partial(_type_a, breaks_ns=breaks)
+    elif (method == "typeA" and resolved.confirm_breaks and options.clock_covariance is not None):
+        # the image's kick instants, a decision taken as it was in the clocks' perturbed runs
+        # too (as the fit's breaks above)
+        from ._prepare import rays_only
+        from .breaks import image_kicks_ns
+
+        rays = rays_only(prep)[0]
+        forward = _type_a(rays, rig, replace(resolved, confirm_breaks=False))
+        function = partial(_type_a, breaks_ns=image_kicks_ns(rays, forward, rig, resolved))
     track = function(prep, rig, resolved)
     if options.clock_covariance is not None and not METHODS[method].own_clock_consider:
         from .clock import with_clock_covariance

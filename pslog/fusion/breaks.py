@@ -30,7 +30,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from ..records import Observations, Track, matching_rows, point_keys
+from ..records import NS, Observations, Track, matching_rows, point_keys
 from ..rig import Rig
 from ._prepare import Prepared, prepare
 
@@ -96,6 +96,142 @@ class SessionFit:
     def breaks_ns(self) -> np.ndarray:
         """(k,) int64, sorted: the fit's break instants (:func:`session_breaks_ns`)."""
         return session_breaks_ns(self.fitted()[0])
+
+
+#: ``break_source="image"``: a camera's image track shows a velocity jump between two of its
+#: detections ``p1``, ``n1`` where the line through ``p2, p1`` misses ``n1`` by more than this
+#: many σ of its noise (plus gravity's bend: :func:`image_kicks_ns`). Chosen on development
+#: sessions (seeds 77400-77700: 3.5 and 4 left the same far points at 30 fps, 3.5 one fewer
+#: at 60 fps for 10 % more good points withheld) before the held-out runs (docs/methods.md,
+#: "Kick instants from the images (session 44)")
+IMAGE_KICK_SIGMAS = 3.5
+#: Image jumps of the cameras this close in time are one kick (its instant: their mean, each
+#: weighted by its precision), seconds: two kicks or bounces of a rally are 80 ms apart or more
+IMAGE_KICK_MERGE_S = 0.015
+
+
+def meeting_instants(up2: np.ndarray, up1: np.ndarray, un1: np.ndarray, un2: np.ndarray,
+                     d1: np.ndarray, h: np.ndarray, d2: np.ndarray, a: np.ndarray
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """Where a camera's image paths on the two sides of a jump meet, elementwise (k rows).
+
+    The forward path through ``up2`` (at ``-d1``) and ``up1`` (at 0) and the backward one
+    through ``un1`` (at ``h``) and ``un2`` (at ``h + d2``), times in seconds from ``up1``'s,
+    each a parabola of the image acceleration ``a`` (pixels/s²): ``f(s) = up1 + v_f s +
+    ½ a s²``, ``v_f = (up1 - up2) / d1 + ½ a d1``; ``b(s) = un1 + v_b (s - h) + ½ a (s -
+    h)²``, ``v_b = (un2 - un1) / d2 - ½ a d2``. ``D(s) = f(s) - b(s) = A + B s`` with ``A =
+    up1 - un1 + v_b h - ½ a h²``, ``B = v_f - v_b + a h`` (the squares cancel); the least
+    squares meeting ``s* = -A·B / |B|²``, clipped to ``[0, h]``.
+
+    up2, up1, un1, un2 : (k, 2) pixels; d1, h, d2 : (k,) seconds; a : (k, 2) pixels/s²
+
+    Returns
+    -------
+    s : (k,) seconds after ``up1``'s time (NaN where ``B`` is 0); weight : (k,) ``|B|²``,
+        (pixels/s)², ``s*``'s precision (its standard deviation ∝ σ / |B|)
+    """
+    d1, h, d2 = (np.asarray(x, np.float64)[:, None] for x in (d1, h, d2))
+    vf = (up1 - up2) / d1 + 0.5 * a * d1  # the forward path's velocity at 0
+    vb = (un2 - un1) / d2 - 0.5 * a * d2  # the backward path's at h
+    A = up1 - un1 + vb * h - 0.5 * a * h ** 2
+    B = vf - vb + a * h
+    weight = np.sum(B * B, axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        s = np.clip(-np.sum(A * B, axis=1) / weight, 0.0, h[:, 0])
+    return np.where(weight > 0, s, np.nan), weight
+
+
+def image_kicks_ns(prep: Prepared, track: Track, rig: Rig, options) -> np.ndarray:
+    """(k,) int64, sorted: kick instants (ns) from each camera's image track alone, for the
+    ``breaks`` rule without a fit (``FusionOptions.break_source="image"``).
+
+    For each camera and each pair of its consecutive detections ``p1``, ``n1`` with one more
+    on each side (``p2`` before, ``n2`` after; every interval within ``max_gap_s``), in
+    undistorted pixels ``u``: the forward line through ``p2, p1`` extrapolated to ``n1``
+    misses ``u_n1`` by ``m = ‖(1 - w) u_p2 + w u_p1 - u_n1‖`` (``w`` the extrapolation's
+    weight); a jump is shown where ``m > k σ √((1 - w)² + w² + 1) + ½ g (t_n1 - t_p1)
+    (t_n1 - t_p2) f D / Z²`` (``k`` = :data:`IMAGE_KICK_SIGMAS`; the bound of type A's
+    kick-aware test, :func:`pslog.fusion.confirm.sides_test`, ``σ`` the larger of
+    ``noise_px`` (0.5 px when None) and the noise the session's detections show,
+    :func:`pslog.fusion.stereo.detection_noise`, in undistorted pixels; ``D``, ``Z`` the
+    ball's distance and depth from ``track``'s point nearest in time). Its instant: where
+    the two sides' paths meet, each a parabola of the image acceleration gravity gives
+    there (``a = J R g``, ``J`` the projection's Jacobian at the ball): ``f(s) = u_p1 +
+    v_f (s - t_p1) + ½ a (s - t_p1)²`` and ``b(s) = u_n1 + v_b (s - t_n1) + ½ a (s - t_n1)²``
+    with ``v_f``, ``v_b`` the chords' velocities moved to ``t_p1`` and ``t_n1``; their
+    difference is linear in ``s`` (the squares cancel), ``D(s) = A + B s``, and ``s* = -A·B /
+    |B|²``, clipped to ``[t_p1, t_n1]``. The cameras' instants within
+    :data:`IMAGE_KICK_MERGE_S` of each other are one kick at their mean weighted by ``|B|²``
+    (``s*``'s precision: σ / |B| per axis).
+
+    ``prep``: type A's prepared observations; ``track``: its forward track (the depths);
+    ``options``: FusionOptions with ``max_gap_s`` set. A kick whose image jump is within the
+    noise in every camera that sees it is not found (docs/methods.md, "Kick instants from
+    the images (session 44)")."""
+    from ..motion import G
+    from .stereo import detection_noise
+
+    obs = prep.obs
+    gap_ns = options.max_gap_s * NS
+    floor = 0.5 if options.noise_px is None else max(options.noise_px, 0.5)
+    parts = []
+    for c, cam in enumerate(prep.cameras):
+        rows = prep.per_camera[c]
+        if len(rows) < 4 or len(track) < 2:
+            continue
+        t = obs.time_ns[rows]
+        u = prep.uv_undistorted[rows]
+        # the ball in this camera's frame at each detection: the track's point nearest in time
+        near = np.clip(np.searchsorted(track.time_ns, t), 1, len(track) - 1)
+        near -= (t - track.time_ns[near - 1]) < (track.time_ns[near] - t)
+        x = track.position_world[near] @ np.asarray(cam.R).T + np.asarray(cam.t)
+        z = x[:, 2]
+        fx, fy = float(cam.K[0][0]), float(cam.K[1][1])
+        with np.errstate(invalid="ignore", divide="ignore"):
+            per_m = max(fx, fy) * np.linalg.norm(x, axis=1) / z ** 2
+            g_cam = np.asarray(cam.R) @ np.array([0.0, 0.0, -G])
+            accel = np.stack([fx * (g_cam[0] - x[:, 0] / z * g_cam[2]) / z,
+                              fy * (g_cam[1] - x[:, 1] / z * g_cam[2]) / z], axis=1)
+        p1 = np.arange(1, len(rows) - 2)
+        p2, n1, n2 = p1 - 1, p1 + 1, p1 + 2
+        ok = ((t[p1] - t[p2] <= gap_ns) & (t[n1] - t[p1] <= gap_ns) & (t[n2] - t[n1] <= gap_ns)
+              & np.all(np.isfinite(u[p2]) & np.isfinite(u[p1]) & np.isfinite(u[n1])
+                       & np.isfinite(u[n2]), axis=1)
+              & (z[p1] > 0) & np.isfinite(per_m[p1]))
+        if not np.any(ok):
+            continue
+        p2, p1, n1, n2 = p2[ok], p1[ok], n1[ok], n2[ok]
+        tp2, tp1, tn1, tn2 = ((t[i] - t[p1]).astype(np.float64) / NS for i in (p2, p1, n1, n2))
+        w = (tn1 - tp2) / (tp1 - tp2)
+        miss = np.hypot(*((1 - w)[:, None] * u[p2] + w[:, None] * u[p1] - u[n1]).T)
+        sigma = np.maximum(detection_noise(prep, t[p1], options.max_gap_s, floor), floor)
+        if prep.uv_jacobian is not None:  # (per axis, in undistorted pixels)
+            jac = prep.uv_jacobian[rows[p1]]
+            sigma = sigma * np.sqrt(np.einsum("nij,nij->n", jac, jac) / 2)
+        bound = (IMAGE_KICK_SIGMAS * sigma * np.sqrt((1 - w) ** 2 + w ** 2 + 1)
+                 + 0.5 * G * (tn1 - tp1) * (tn1 - tp2) * per_m[p1])
+        jump = miss > bound
+        if not np.any(jump):
+            continue
+        a = np.where(np.isfinite(accel[p1]), accel[p1], 0.0)[jump]
+        s, weight = meeting_instants(u[p2[jump]], u[p1[jump]], u[n1[jump]], u[n2[jump]],
+                                     tp1[jump] - tp2[jump], tn1[jump] - tp1[jump],
+                                     tn2[jump] - tn1[jump], a)
+        fine = np.isfinite(s) & (weight > 0)
+        parts.append((t[p1[jump]][fine] + np.round(s[fine] * NS).astype(np.int64),
+                      weight[fine]))
+    if not parts:
+        return np.zeros(0, np.int64)
+    instant = np.concatenate([p[0] for p in parts])
+    weight = np.concatenate([p[1] for p in parts])
+    order = np.argsort(instant, kind="stable")
+    instant, weight = instant[order], weight[order]
+    group = np.cumsum(np.r_[True, np.diff(instant) > round(IMAGE_KICK_MERGE_S * NS)]) - 1
+    first = instant[np.r_[0, np.flatnonzero(np.diff(group)) + 1]]
+    # (offsets from each group's first instant: the weighted mean without float64's ns loss)
+    offset = np.bincount(group, weights=(instant - first[group]) * weight) / np.bincount(
+        group, weights=weight)
+    return first + np.round(offset).astype(np.int64)
 
 
 def reversed_prepared(prep: Prepared, rig: Rig) -> tuple[Prepared, int]:

@@ -3456,7 +3456,8 @@ def start_fusion(detections: Detections, rig: Rig, methods, options=None, *,
     workers = default_workers(len(methods)) if workers is None else workers
     # type A's confirm_breaks takes its kick instants from smooth's fit of the session:
     # made once, by smooth's fusion or type A's, whichever asks first (the other waits)
-    sharing = "typeA" in methods and options.confirm_breaks and len(rig) >= 2
+    sharing = ("typeA" in methods and options.confirm_breaks and options.break_source == "fit"
+               and len(rig) >= 2)
     fit_of: list = []  # [SessionFit] when sharing, given smooth's input's maker
     made_input: dict = {}  # smooth's gated input when sharing (the fit's and smooth's)
 
