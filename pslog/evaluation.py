@@ -457,10 +457,10 @@ LEFT_OUT_TEXT = {
     "contradicted": "typeA: another camera's detections place the ball elsewhere (--confirm-gaps "
                     "kicks, the default: that camera's track around it, on its side of a kick "
                     "the track shows; all, on: the next camera's detection)",
-    "break": "typeA (--confirm-gaps breaks): its construction spans a velocity break of "
-             "smooth's fit, and type A's point from the detections after it spans one too or "
-             "was not made (its own tests left it out, or too few detections follow: near "
-             "the session's end)",
+    "break": "typeA (--confirm-gaps breaks or jumps): its construction spans a velocity "
+             "break of smooth's fit (jumps: a kick the cameras' images show), and type A's "
+             "point from the detections after it spans one too or was not made (its own "
+             "tests left it out, or too few detections follow: near the session's end)",
     "unconfirmed": "not confirmed in time (typeA: no next camera's detection; filter: after "
                    "a jump or a surprise, two more updates, one from another camera)",
     "held": "filter: held for the next camera, whose detection placed a jump before it",

@@ -170,11 +170,11 @@ def run(args: argparse.Namespace) -> int:
                 print(f"  {m}: {REJECTED_TEXT[m]}")
         if backward:
             print()
-            print("points made from the detections after them (--confirm-gaps breaks: the "
-                  "paper's construction, from the detections before, spanned a velocity "
-                  "break of smooth's fit; type A's point from the time-reversed detections "
-                  "replaced it; span_s < 0; in the tables with the rest, no Figure 2 in pslog "
-                  "view):")
+            print("points made from the detections after them (--confirm-gaps breaks or "
+                  "jumps: the paper's construction, from the detections before, spanned a "
+                  "velocity break of smooth's fit or a kick the images show; type A's point "
+                  "from the time-reversed detections replaced it; span_s < 0; in the tables "
+                  "with the rest, no Figure 2 in pslog view):")
             for m, n in backward.items():
                 print(f"{m:<9} {n} of {len(session.tracks[m])} points")
     return 0
