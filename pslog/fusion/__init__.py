@@ -395,6 +395,9 @@ def _type_a(prep: Prepared, rig: Rig, options: FusionOptions, *,
     if options.confirm_breaks:
         from .breaks import across_breaks, image_kicks_ns
 
+        del made, table  # (the kernel's own track and quality table: the backward pass's
+        # is made next, and a 90-minute match's are 150 MB)
+
         if options.break_source == "image" and breaks_ns is None:
             # (the forward track's points give the depths)
             breaks_ns = image_kicks_ns(prep, track, rig, options)
