@@ -184,7 +184,15 @@ def _export_c3d(session, path: str, force: bool) -> None:
               f"one (times on no common grid: rolling shutters, drifting clocks, jitter; or "
               f"cameras firing together): "
               + ", ".join(f"{m} {n} frames from {len(session.tracks[m])} points"
-                          for m, n in resampled.items())
-              + "; linear between points at most two frame periods apart (a longer gap "
-                "left empty, a lone point in it on its nearest frame); --csv, --jsonl or "
-                "--parquet keep every point at its own time")
+                          for m, (n, _nearer) in resampled.items())
+              + "; linear between points with no detection the method withheld and at "
+                "most one frame without the ball between them (any other gap stays empty; a "
+                "lone point in it on its nearest frame); --csv, --jsonl or --parquet keep "
+                "every point at its own time")
+        nearer = {m: k for m, (_n, k) in resampled.items() if k}
+        if nearer:  # lone points sharing a frame: the frame holds the nearest in time
+            print("  not in the file: " + ", ".join(
+                f"{m} {k} point{'s' if k > 1 else ''}" for m, k in nearer.items())
+                + ", lone points (no frame bridged beside them) whose nearest frame holds "
+                  "another lone point nearer its time; --csv, --jsonl or --parquet keep "
+                  "them")
