@@ -18,7 +18,7 @@ import warnings
 
 import numpy as np
 import pytest
-from _cli import pslog_ok
+from _cli import pslog, pslog_ok
 from test_export_paths_and_c3d import _c3d_frames, _drifting_rig
 
 from pslog.log import read_session
@@ -211,3 +211,33 @@ def test_c3d_past_frame_65535_read_back_by_its_own_count(tmp_path):
     assert at[0] == 0 and at[-1] == n - 1
     assert np.allclose(frames[at, 0, :3], track.position_world * 1000.0, atol=1e-3)
     assert np.count_nonzero(frames[:, 0, 3] != -1) == len(track)
+
+
+def test_import_and_eval_name_the_export_formats_they_do_not_read(tmp_path):
+    """Session 44's walk: a new user giving ``pslog import --detections`` or ``pslog eval
+    --truth`` a file ``pslog export`` wrote in another format. A TUM trajectory was a "bad
+    header '# timestamp tx ty ...'" with a --columns hint; a C3D or Parquet file "not a text
+    (CSV) file (byte 8 ...)". Each is now named, with what reads it, in one line."""
+    pytest.importorskip("c3d")
+    pytest.importorskip("pyarrow")
+    session, fused = tmp_path / "s.mcap", tmp_path / "f.mcap"
+    pslog_ok("simulate", "--rig", "paper3", "--timing", "typeA", "--duration", "0.6",
+             "--seed", "77021", "-o", session)
+    pslog_ok("fuse", session, "--method", "typeA", "-o", fused)
+    pslog_ok("export", fused, "--tum", tmp_path / "traj", "--c3d", tmp_path / "t.c3d",
+             "--parquet", tmp_path / "t.parquet")
+    rig = tmp_path / "rig.toml"
+    rig.write_text(pslog_ok("rig", "show", session))
+    for name, said in (("traj/typeA.tum", "holds a TUM trajectory"),
+                       ("t.c3d", "is a C3D file"), ("t.parquet", "is a Parquet file")):
+        done = pslog("import", "--rig", rig, "--detections", tmp_path / name,
+                     "-o", tmp_path / "x.mcap")
+        assert done.returncode == 1 and said in done.stderr, done.stderr
+        assert len(done.stderr.splitlines()) == 1
+        assert "not a detections CSV" in done.stderr or "not detections" in done.stderr
+        assert not (tmp_path / "x.mcap").exists()
+    for name, said in (("t.c3d", "is a C3D file: --truth reads a CSV t,x,y,z"),
+                       ("t.parquet", "is a Parquet file, not a truth trajectory")):
+        done = pslog("eval", fused, "--truth", tmp_path / name)
+        assert done.returncode == 1 and said in done.stderr, done.stderr
+        assert len(done.stderr.splitlines()) == 1
