@@ -89,14 +89,16 @@ def run(args: argparse.Namespace) -> int:
     session = read_session(args.session)
     if any(track_options) and not session.tracks:
         raise InputError(f"{args.session} has no fused tracks to export (run 'pslog fuse')")
+    grid = None
     if args.c3d:  # what can be refused before anything is written, is
         from pslog.interchange.track_formats import c3d_check
 
-        c3d_check(session)
+        grid = c3d_check(session)
     # one exporter per option: each writes its own file(s) from the session, all or nothing
     # (all_or_nothing: every file complete first, then all moved over the old ones; on an
     # error or a signal none is, and the old files stay); the lines after the moves
     import contextlib
+    import functools
     import io
 
     from pslog.outputs import all_or_nothing
@@ -108,7 +110,7 @@ def run(args: argparse.Namespace) -> int:
             for path, export in ((args.detections, _export_detections),
                                  (args.csv, _export_tracks), (args.tum, _export_tum),
                                  (args.jsonl, _export_jsonl), (args.parquet, _export_parquet),
-                                 (args.c3d, _export_c3d)):
+                                 (args.c3d, functools.partial(_export_c3d, grid=grid))):
                 if path:
                     export(session, path, args.force)
     except BaseException:
@@ -173,10 +175,10 @@ def _export_parquet(session, path: str, force: bool) -> None:
     print(f"wrote {path}: {write_parquet(session, path, force=force)} rows")
 
 
-def _export_c3d(session, path: str, force: bool) -> None:
+def _export_c3d(session, path: str, force: bool, grid=None) -> None:
     from pslog.interchange.track_formats import write_c3d
 
-    frames, rate, resampled = write_c3d(session, path, force=force)
+    frames, rate, resampled = write_c3d(session, path, force=force, grid=grid)
     print(f"wrote {path}: {frames} frames at {rate:g} Hz, one point per method"
           + (" and the truth" if session.truth is not None else "") + " (mm)")
     if resampled:  # irregular times: two points on one frame (one was left out before)

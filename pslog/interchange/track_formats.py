@@ -373,23 +373,26 @@ C3D_GRID_MAX_FRAMES = 65535
 C3D_MAX_FRAMES = 2**24
 
 
-def c3d_check(session) -> None:
+def c3d_check(session) -> tuple[float, int, int]:
     """:class:`InputError` when :func:`write_c3d` would refuse ``session`` (no c3d package,
-    no track to set the frame rate, too many frames): said before any file is written."""
+    no track to set the frame rate, too many frames): said before any file is written.
+    Returns the grid (:func:`c3d_grid`), for :func:`write_c3d`'s ``grid``."""
     try:
         import c3d  # noqa: F401 (only whether it is there)
     except ImportError:
         raise InputError("--c3d needs the c3d package, which is not installed: pip install "
                          "'pslog[c3d]' (or pip install c3d)") from None
-    rate, _first, n_frames = c3d_grid(session)
+    rate, first, n_frames = c3d_grid(session)
     if n_frames > C3D_MAX_FRAMES:  # (its frame count, a float32 parameter, inexact beyond)
         raise InputError(f"{session.path}: {n_frames} frames at {rate:g} Hz: beyond the "
                          f"{C3D_MAX_FRAMES} frames a C3D file counts exactly (its "
                          f"POINT:LONG_FRAMES is a 32-bit float); export --csv, --jsonl or "
                          f"--parquet, or cut the session")
+    return rate, first, n_frames
 
 
-def write_c3d(session, path: str | Path, *, force: bool = False
+def write_c3d(session, path: str | Path, *, force: bool = False,
+              grid: tuple[float, int, int] | None = None
               ) -> tuple[int, float, dict[str, tuple[int, int]]]:
     """Write one C3D point per method (labels are the method names) and ``truth`` (when the
     session has one, interpolated at the frame times), on the grid of :func:`c3d_grid`.
@@ -416,18 +419,21 @@ def write_c3d(session, path: str | Path, *, force: bool = False
     C3D numbers its frames with integers (``POINT:RATE`` and the header's first frame): the
     first frame's time is ``(first_frame - 1) / rate`` on the session clock only to within
     half a frame period; the exact time of frame 1 is stored as ``PSLOG:FIRST_FRAME_S``
-    (decimal seconds, a string: C3D has no 64-bit number).
+    (decimal seconds, a string: C3D has no 64-bit number). ``grid``: :func:`c3d_check`'s
+    return for this session, when the caller checked it (the grid is the export's costliest
+    part: a 36 s rally's took 0.07 s, and was made three times).
 
     Returns
     -------
     (n_frames, rate_hz, {method resampled: (its valid frames, its lone points left out
     beside a nearer one)})
     """
-    c3d_check(session)
+    if grid is None:  # (given: :func:`c3d_check`'s, the session checked)
+        grid = c3d_check(session)
     import c3d
 
     tracks = _tracks(session)
-    rate, first, n_frames = c3d_grid(session)
+    rate, first, n_frames = grid
     labels = list(tracks)
     has_truth = session.truth is not None and len(session.truth) > 1
     if has_truth:
