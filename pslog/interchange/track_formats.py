@@ -408,13 +408,14 @@ def write_c3d(session, path: str | Path, *, force: bool = False,
     grid instead (:func:`_resample`): its position at each frame's time, linear between the
     points either side, where the session's detections explain the gap between them
     (:func:`_detection_gaps`): no detection whose point the method left out lies between
-    them, and at most :data:`C3D_BRIDGE_MISSED` frame without the ball; frames the session
-    lost, up to :data:`C3D_BRIDGE_PERIODS` frame periods of the grid or :data:`GAP_INTERVAL`
-    of the slowest camera (a method that does not make a point a detection: no longer than
+    them, at most :data:`C3D_BRIDGE_MISSED` frame without the ball, and at most
+    :data:`C3D_BRIDGE_PERIODS` frame periods of the grid or :data:`GAP_INTERVAL` of the
+    slowest camera apart, the longer (the bound for frames the session lost, which have no
+    row to count; a method that does not make a point a detection: no more than
     :data:`GAP_INTERVAL` times its median interval either). Any other gap stays empty, but
     for a lone point in it, on its nearest frame (of lone points nearest one frame, the
-    nearest in time; the others counted). Which methods, their
-    valid frames and their points left out so are returned for the command to say.
+    nearest in time; the others counted). Which methods, their valid frames and their
+    points left out so are returned for the command to say.
 
     C3D numbers its frames with integers (``POINT:RATE`` and the header's first frame): the
     first frame's time is ``(first_frame - 1) / rate`` on the session clock only to within
