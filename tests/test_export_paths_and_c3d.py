@@ -57,6 +57,11 @@ def test_export_outputs_in_the_tum_folder_in_any_order(fused, tmp_path):
 
 
 def _c3d_frames(path):
+    """``(labels, frames (n, points, 5))`` of a C3D, its own count of frames: ``c3d`` 0.6's
+    reader joins TRIAL:ACTUAL_START_FIELD's words as low + 65535 · high and reads one frame
+    too many per 65,536 of a start past 65,535 (from the padding: a valid point at the
+    origin); the count here is the end's frame less the start's, each high << 16 | low."""
+    import itertools
     import warnings
 
     c3d = pytest.importorskip("c3d")
@@ -64,7 +69,14 @@ def _c3d_frames(path):
         warnings.simplefilter("ignore", UserWarning)  # "No analog data found in file."
         reader = c3d.Reader(f)
         labels = [s.strip() for s in reader.point_labels]
-        frames = np.array([points for _, points, _ in reader.read_frames()])
+        n = reader.frame_count
+        start, end = reader.get("TRIAL:ACTUAL_START_FIELD"), reader.get("TRIAL:ACTUAL_END_FIELD")
+        if start is not None and end is not None:
+            (lo, hi), (end_lo, end_hi) = start.uint16_array, end.uint16_array
+            n = (int(end_hi) << 16 | int(end_lo)) - (int(hi) << 16 | int(lo)) + 1
+        frames = np.array([points for _, points, _ in itertools.islice(reader.read_frames(),
+                                                                         n)])
+    assert len(frames) == n
     return labels, frames
 
 
@@ -87,8 +99,12 @@ def test_c3d_of_times_on_no_grid_resamples_every_frame(tmp_path):
     of every method's points here ("sharing a frame with a nearer point"; 25-30 % in walk42)
     and put the others at frames up to half a period from their times. Now such a method is
     resampled: at every frame between two of its points at most two periods apart, its
-    position there, linear in time; the command says so."""
-    from pslog.interchange.track_formats import c3d_grid
+    position there, linear in time; the command says so. Session 44: the gaps the
+    detections explain (no point withheld, one frame without the ball at most) up to 50 ms:
+    the grid is 138 Hz, whose two periods (14.4 ms) left 35 % of smooth's frames empty
+    inside its complete track, whose points come up to 26 ms apart (a rolling shutter's row
+    times)."""
+    from pslog.interchange.track_formats import _detection_gaps, c3d_grid
 
     session_path, fused = tmp_path / "s.mcap", tmp_path / "f.mcap"
     pslog_ok("simulate", "--rig", _drifting_rig(tmp_path), "--motion", "rally", "--duration",
@@ -101,6 +117,8 @@ def test_c3d_of_times_on_no_grid_resamples_every_frame(tmp_path):
     rate, first, n_frames = c3d_grid(session)
     labels, frames = _c3d_frames(path)
     frame_ns = first + np.round(np.arange(n_frames) * (1e9 / rate)).astype(np.int64)
+    bridge = max(2e9 / rate, 1.5e9 / 30)  # 1.5 frame periods of the 30 fps cameras
+    assert bridge > 2e9 / rate * 3
     for j, method in enumerate(labels[:-1]):
         track = session.tracks[method]
         t, index = np.unique(track.time_ns, return_index=True)
@@ -109,7 +127,10 @@ def test_c3d_of_times_on_no_grid_resamples_every_frame(tmp_path):
         after = np.searchsorted(t, frame_ns)
         inner = (after > 0) & (after < len(t))
         a, b = np.clip(after - 1, 0, len(t) - 1), np.clip(after, 0, len(t) - 1)
-        want = (inner & (t[b] - t[a] <= 2e9 / rate)) | (t[b] == frame_ns)
+        withheld, missed = _detection_gaps(session, method)  # (test_c3d_leftovers.py)
+        assert len(missed) == 0  # (every frame sees the ball here)
+        kept = np.searchsorted(withheld, t[b]) == np.searchsorted(withheld, t[a], "right")
+        want = (inner & (t[b] - t[a] <= bridge) & kept) | (t[b] == frame_ns)
         expect = np.stack([np.interp(frame_ns, t, p[:, k]) for k in range(3)], axis=1)
         # a lone point (no neighbour within two periods) on its nearest frame, as it is
         near = np.round((t - first) * rate / 1e9).astype(int)
@@ -121,6 +142,8 @@ def test_c3d_of_times_on_no_grid_resamples_every_frame(tmp_path):
         assert np.array_equal(valid, want), method
         assert valid[near].all()  # every point in the file
         assert f"{method} {int(want.sum())} frames from {len(track)} points" in out
+        if method == "smooth":  # nothing withheld: its whole span, but for 4 frames
+            assert want.sum() >= n_frames - 4
         assert np.abs(frames[valid, j, :3] - expect[valid] * 1000.0).max() < 0.01  # mm
 
 

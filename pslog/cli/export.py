@@ -89,14 +89,16 @@ def run(args: argparse.Namespace) -> int:
     session = read_session(args.session)
     if any(track_options) and not session.tracks:
         raise InputError(f"{args.session} has no fused tracks to export (run 'pslog fuse')")
+    grid = None
     if args.c3d:  # what can be refused before anything is written, is
         from pslog.interchange.track_formats import c3d_check
 
-        c3d_check(session)
+        grid = c3d_check(session)
     # one exporter per option: each writes its own file(s) from the session, all or nothing
     # (all_or_nothing: every file complete first, then all moved over the old ones; on an
     # error or a signal none is, and the old files stay); the lines after the moves
     import contextlib
+    import functools
     import io
 
     from pslog.outputs import all_or_nothing
@@ -108,7 +110,7 @@ def run(args: argparse.Namespace) -> int:
             for path, export in ((args.detections, _export_detections),
                                  (args.csv, _export_tracks), (args.tum, _export_tum),
                                  (args.jsonl, _export_jsonl), (args.parquet, _export_parquet),
-                                 (args.c3d, _export_c3d)):
+                                 (args.c3d, functools.partial(_export_c3d, grid=grid))):
                 if path:
                     export(session, path, args.force)
     except BaseException:
@@ -173,10 +175,10 @@ def _export_parquet(session, path: str, force: bool) -> None:
     print(f"wrote {path}: {write_parquet(session, path, force=force)} rows")
 
 
-def _export_c3d(session, path: str, force: bool) -> None:
+def _export_c3d(session, path: str, force: bool, grid=None) -> None:
     from pslog.interchange.track_formats import write_c3d
 
-    frames, rate, resampled = write_c3d(session, path, force=force)
+    frames, rate, resampled = write_c3d(session, path, force=force, grid=grid)
     print(f"wrote {path}: {frames} frames at {rate:g} Hz, one point per method"
           + (" and the truth" if session.truth is not None else "") + " (mm)")
     if resampled:  # irregular times: two points on one frame (one was left out before)
@@ -184,7 +186,15 @@ def _export_c3d(session, path: str, force: bool) -> None:
               f"one (times on no common grid: rolling shutters, drifting clocks, jitter; or "
               f"cameras firing together): "
               + ", ".join(f"{m} {n} frames from {len(session.tracks[m])} points"
-                          for m, n in resampled.items())
-              + "; linear between points at most two frame periods apart (a longer gap "
-                "left empty, a lone point in it on its nearest frame); --csv, --jsonl or "
-                "--parquet keep every point at its own time")
+                          for m, (n, _nearer) in resampled.items())
+              + "; linear between points with no detection the method withheld and at "
+                "most one frame without the ball between them (any other gap stays empty; a "
+                "lone point in it on its nearest frame); --csv, --jsonl or --parquet keep "
+                "every point at its own time")
+        nearer = {m: k for m, (_n, k) in resampled.items() if k}
+        if nearer:  # lone points sharing a frame: the frame holds the nearest in time
+            print("  not in the file: " + ", ".join(
+                f"{m} {k} point{'s' if k > 1 else ''}" for m, k in nearer.items())
+                + ", lone points (no frame bridged beside them) whose nearest frame holds "
+                  "another lone point nearer its time; --csv, --jsonl or --parquet keep "
+                  "them")

@@ -373,24 +373,27 @@ C3D_GRID_MAX_FRAMES = 65535
 C3D_MAX_FRAMES = 2**24
 
 
-def c3d_check(session) -> None:
+def c3d_check(session) -> tuple[float, int, int]:
     """:class:`InputError` when :func:`write_c3d` would refuse ``session`` (no c3d package,
-    no track to set the frame rate, too many frames): said before any file is written."""
+    no track to set the frame rate, too many frames): said before any file is written.
+    Returns the grid (:func:`c3d_grid`), for :func:`write_c3d`'s ``grid``."""
     try:
         import c3d  # noqa: F401 (only whether it is there)
     except ImportError:
         raise InputError("--c3d needs the c3d package, which is not installed: pip install "
                          "'pslog[c3d]' (or pip install c3d)") from None
-    rate, _first, n_frames = c3d_grid(session)
+    rate, first, n_frames = c3d_grid(session)
     if n_frames > C3D_MAX_FRAMES:  # (its frame count, a float32 parameter, inexact beyond)
         raise InputError(f"{session.path}: {n_frames} frames at {rate:g} Hz: beyond the "
                          f"{C3D_MAX_FRAMES} frames a C3D file counts exactly (its "
                          f"POINT:LONG_FRAMES is a 32-bit float); export --csv, --jsonl or "
                          f"--parquet, or cut the session")
+    return rate, first, n_frames
 
 
-def write_c3d(session, path: str | Path, *, force: bool = False
-              ) -> tuple[int, float, dict[str, int]]:
+def write_c3d(session, path: str | Path, *, force: bool = False,
+              grid: tuple[float, int, int] | None = None
+              ) -> tuple[int, float, dict[str, tuple[int, int]]]:
     """Write one C3D point per method (labels are the method names) and ``truth`` (when the
     session has one, interpolated at the frame times), on the grid of :func:`c3d_grid`.
 
@@ -403,24 +406,35 @@ def write_c3d(session, path: str | Path, *, force: bool = False
     times: rolling shutters, drifting clocks, jittered host stamps; the nearer was kept and
     the other left out, 11-30 % of a rolling-shutter session's points) is resampled onto the
     grid instead (:func:`_resample`): its position at each frame's time, linear between the
-    points either side, where they are at most :data:`C3D_BRIDGE_PERIODS` frame periods
-    apart (a longer gap stays empty, but for a lone point in it, on its nearest frame);
-    which methods, and their valid frames, are returned for the command to say.
+    points either side, where the session's detections explain the gap between them
+    (:func:`_detection_gaps`): no detection whose point the method left out lies between
+    them, at most :data:`C3D_BRIDGE_MISSED` frame without the ball, and at most
+    :data:`C3D_BRIDGE_PERIODS` frame periods of the grid or :data:`GAP_INTERVAL` of the
+    slowest camera apart, the longer (the bound for frames the session lost, which have no
+    row to count; a method that does not make a point a detection: no more than
+    :data:`GAP_INTERVAL` times its median interval either). Any other gap stays empty, but
+    for a lone point in it, on its nearest frame (of lone points nearest one frame, the
+    nearest in time; the others counted). Which methods, their valid frames and their
+    points left out so are returned for the command to say.
 
     C3D numbers its frames with integers (``POINT:RATE`` and the header's first frame): the
     first frame's time is ``(first_frame - 1) / rate`` on the session clock only to within
     half a frame period; the exact time of frame 1 is stored as ``PSLOG:FIRST_FRAME_S``
-    (decimal seconds, a string: C3D has no 64-bit number).
+    (decimal seconds, a string: C3D has no 64-bit number). ``grid``: :func:`c3d_check`'s
+    return for this session, when the caller checked it (the grid is the export's costliest
+    part: a 36 s rally's took 0.07 s, and was made three times).
 
     Returns
     -------
-    (n_frames, rate_hz, {method resampled: its valid frames})
+    (n_frames, rate_hz, {method resampled: (its valid frames, its lone points left out
+    beside a nearer one)})
     """
-    c3d_check(session)
+    if grid is None:  # (given: :func:`c3d_check`'s, the session checked)
+        grid = c3d_check(session)
     import c3d
 
     tracks = _tracks(session)
-    rate, first, n_frames = c3d_grid(session)
+    rate, first, n_frames = grid
     labels = list(tracks)
     has_truth = session.truth is not None and len(session.truth) > 1
     if has_truth:
@@ -428,7 +442,12 @@ def write_c3d(session, path: str | Path, *, force: bool = False
     points = np.zeros((n_frames, len(labels), 5), dtype=np.float32)
     points[:, :, 3] = -1.0  # invalid until a point is put there
     frame_ns = first + np.round(np.arange(n_frames) * (NS / rate)).astype(np.int64)
-    resampled: dict[str, int] = {}
+    resampled: dict[str, tuple[int, int]] = {}
+    # a gap of lost frames (no row in the session): bridged up to 1.5 frame periods of the
+    # slowest camera (a sync rig's points come in bunches a frame period apart) or two of
+    # the grid's
+    longest_ns = max(C3D_BRIDGE_PERIODS * NS / rate,
+                     GAP_INTERVAL * NS / min(cam.fps for cam in session.rig.cameras))
     for j, (method, track) in enumerate(tracks.items()):
         frames = np.clip(np.round((track.time_ns - first) * rate / NS).astype(np.int64), 0,
                          n_frames - 1)
@@ -439,21 +458,27 @@ def write_c3d(session, path: str | Path, *, force: bool = False
             points[frames, j, 3] = residual
             points[frames, j, 4] = 0.0
             continue
-        valid, position, res = _resample(track.time_ns, track.position_world, residual,
-                                         frame_ns, C3D_BRIDGE_PERIODS * NS / rate)
+        withheld, missed = _detection_gaps(session, method)
+        bridge_ns = longest_ns
+        if withheld is None:  # not a point a detection: no longer than its own spacing
+            bridge_ns = min(bridge_ns, GAP_INTERVAL * _median_step(track.time_ns))
+        valid, position, res, nearer = _resample(track.time_ns, track.position_world,
+                                                 residual, frame_ns, bridge_ns, withheld,
+                                                 missed)
         points[valid, j, :3] = position * 1000.0
         points[valid, j, 3] = res
         points[valid, j, 4] = 0.0
-        resampled[method] = len(valid)
+        resampled[method] = (len(valid), nearer)
     if has_truth:
         at = session.truth.at(frame_ns)
         ok = np.all(np.isfinite(at), axis=1)
         points[ok, -1, :3] = at[ok] * 1000.0
         points[ok, -1, 3] = 0.0
-    writer = c3d.Writer(point_rate=float(rate), analog_rate=0.0, point_scale=-1.0,
-                        point_units="mm  ")
+    writer = _exact_start_writer(c3d)(point_rate=float(rate), analog_rate=0.0,
+                                      point_scale=-1.0, point_units="mm  ")
     writer.set_point_labels(labels)
-    writer.set_start_frame(round(first * rate / NS) + 1)  # frame 1 at the clock's 0
+    start_frame = round(first * rate / NS) + 1  # frame 1 at the clock's 0
+    writer.set_start_frame(start_frame)
     # the integer start frame is within half a period of the grid's first time: the exact
     # time, for a reader that needs it
     group = writer.add_group(max((i for i, _g in writer.group_listed()), default=0) + 1,
@@ -468,25 +493,136 @@ def write_c3d(session, path: str | Path, *, force: bool = False
         # tracker has: not a problem to show the user
         warnings.simplefilter("ignore", UserWarning)
         writer.write(f)
+        if start_frame >> 16:  # c3d's own reader: as many frames more, each invalid here
+            f.seek(512 * (int(writer.header.data_block) - 1) + points[:, :, :4].nbytes)
+            f.write(_invalid_frames(start_frame >> 16, len(labels)))
+            f.truncate()
+            f.write(bytes(-f.tell() % 512))
     return n_frames, rate, resampled
 
 
+def _invalid_frames(n: int, n_points: int) -> bytes:
+    """``n`` C3D frames of ``n_points`` invalid points (float storage: x y z 0, residual
+    word -1), written after a file's last frame where the ``c3d`` package's reader (0.6)
+    reads one frame more per 65,536 of a start frame past 65,535 (its ``first_frame`` joins
+    TRIAL:ACTUAL_START_FIELD's words as ``low + 65535 · high``): it reads those instead of
+    the block's zero padding, which is a valid point at the origin; every other reader takes
+    the count from the parameters and reads none of them."""
+    frame = np.zeros((n, n_points, 4), dtype="<f4")
+    frame[:, :, 3] = -1.0
+    return frame.tobytes()
+
+
+def _exact_start_writer(c3d):
+    """``c3d.Writer`` with its start frame read back as the file format has it. ``write``
+    takes the start frame from the writer's ``first_frame``, which (``c3d`` 0.6, the
+    reader's code) joins TRIAL:ACTUAL_START_FIELD's two 16-bit words as ``low + 65535 ·
+    high``, and writes that back: a start past frame 65,535 was written one frame early per
+    65,536 (a track at 1000 s on a 90 Hz grid, frame 90,004: 90,003, its every frame 11 ms
+    early to btk and Mokka, which read ``high << 16 | low``). Here ``first_frame`` is the
+    words' 32-bit value, so ``write`` keeps the frame :func:`write_c3d` set."""
+
+    class Writer(c3d.Writer):
+        @property
+        def first_frame(self) -> int:
+            param = self.get("TRIAL:ACTUAL_START_FIELD")
+            if param is None:
+                return int(self.header.first_frame)
+            low, high = (int(w) for w in param.uint16_array)
+            return high << 16 | low
+
+    return Writer
+
+
 #: :func:`write_c3d` resamples a method's track at a frame's time between the points either
-#: side of it when they are at most this many frame periods apart (one point missed between
-#: them bridged; a longer gap stays empty, as the method left it)
+#: side of it when at most :data:`C3D_BRIDGE_MISSED` of the session's frames between them
+#: lack the ball (the method's gate kept no candidate of theirs: one missed detection
+#: bridged) and none holds a detection whose point the method withheld
+#: (:func:`_detection_gaps`: a gap the method left stays empty); and, for frames the session
+#: lost (no row), no longer than this many frame periods of the grid or
+#: :data:`GAP_INTERVAL` frame periods of the slowest camera
 C3D_BRIDGE_PERIODS = 2.0
+#: the frames without the ball a bridge of :func:`_resample` may cross
+C3D_BRIDGE_MISSED = 1
+#: a method makes a point a detection when it has points at this share of the times of the
+#: detections its gate kept, at least (type A, smooth, filter, nearest: 0.9-1; typeB,
+#: linear, sync make one of several cameras' detections: 0.1-0.4)
+C3D_POINT_A_DETECTION = 0.5
+
+
+def _detection_gaps(session, method: str) -> tuple[np.ndarray | None, np.ndarray]:
+    """What the session's detections say of the gaps in ``method``'s track: ``(withheld,
+    missed)``, sorted int64 ns.
+
+    ``withheld``: the capture times of the ball's detections the method made no point at.
+    The ball's detections are the candidates its gating kept (every candidate less the
+    track's ``rejections``), at their true times (:func:`pslog.timing.true_times_ns`: clock
+    offset, drift, the rolling shutter's row), the times the methods give their points. A
+    point the method left out (``Track.dropped``: smooth's ``contradicted_run``, type A's
+    ``kink``, ``contradicted`` or ``break``, the filter's ``held``, ...) is not in the
+    track, so its detection is here: a gap holding one is the method's, and
+    :func:`_resample` does not bridge it. None for a method that does not make a point a
+    detection (fewer than :data:`C3D_POINT_A_DETECTION` of them at its points' times:
+    typeB, linear and sync make one of several cameras' detections, ``smooth --rate`` its
+    own grid): its detections without a point are no sign of a point withheld.
+
+    ``missed``: the top-row true times of the session's frames holding no such candidate (a
+    frame whose candidates the gate all refused holds no ball for the method, as a missed
+    one)."""
+    from ..timing import camera_parameters, true_times_ns
+
+    track, d = session.tracks[method], session.detections
+    p = camera_parameters(session.rig)
+    frame, camera = d.cand_frame, d.frame_camera[d.cand_frame]
+    keep = np.ones(len(frame), dtype=bool)
+    rejected = session.rejections.get(method)
+    if rejected is not None and len(rejected):  # (camera, frame counter, pixel) as stored
+        def keys(cam, index, uv):
+            table = np.empty(len(cam), dtype=[("c", "<i8"), ("i", "<i8"), ("u", "<f8"),
+                                              ("v", "<f8")])
+            table["c"], table["i"], table["u"], table["v"] = cam, index, uv[:, 0], uv[:, 1]
+            return table
+        keep = ~np.isin(keys(camera, d.frame_index[frame], d.cand_uv),
+                        keys(rejected.camera, rejected.frame_index, rejected.uv))
+    frame, camera = frame[keep], camera[keep]
+    seen = np.unique(true_times_ns(d.frame_time_ns[frame], d.cand_uv[keep, 1],
+                                   p["height"][camera], p["clock_offset"][camera],
+                                   p["clock_drift_ppm"][camera], p["readout"][camera]))
+    empty = np.ones(len(d.frame_time_ns), dtype=bool)
+    empty[frame] = False
+    cam = d.frame_camera[empty]
+    missed = np.sort(true_times_ns(d.frame_time_ns[empty], 0.0, p["height"][cam],
+                                   p["clock_offset"][cam], p["clock_drift_ppm"][cam],
+                                   p["readout"][cam]))
+    made = np.isin(seen, track.time_ns)
+    if not len(seen) or np.count_nonzero(made) < C3D_POINT_A_DETECTION * len(seen):
+        return None, missed
+    return seen[~made], missed
+
+
+def _median_step(time_ns: np.ndarray) -> float:
+    """The median interval between a track's distinct times, ns (inf with fewer than two)."""
+    steps = np.diff(np.unique(np.asarray(time_ns, np.int64)))
+    return float(np.median(steps)) if len(steps) else math.inf
 
 
 def _resample(time_ns: np.ndarray, position: np.ndarray, residual: np.ndarray,
-              frame_ns: np.ndarray, bridge_ns: float
-              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+              frame_ns: np.ndarray, bridge_ns: float, withheld: np.ndarray | None = None,
+              missed: np.ndarray | None = None
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
     """A track at the frame times ``frame_ns`` (a uniform grid): ``(frames, positions,
-    residuals)`` of the frames inside it, each linear in time between the points either
-    side of its time (a point at the frame's time exactly: that point), where those are at
-    most ``bridge_ns`` apart; and a point with no frame so (its neighbours beyond the bridge
-    on both sides) on its nearest frame, so that every point is in the file (but for two such
-    points nearest one frame with no frame between them: the nearer). Points of one
-    time (cameras firing together) are first made one, their mean."""
+    residuals, nearer)`` of the frames inside it, each linear in time between the points
+    either side of its time (a point at the frame's time exactly: that point), where those
+    are at most ``bridge_ns`` apart, no time of ``withheld`` lies between them (sorted int64
+    ns: the detections the method made no point at, :func:`_detection_gaps`; a span the
+    method left empty stays empty) and at most :data:`C3D_BRIDGE_MISSED` of ``missed`` (the
+    frames without the ball). A point with no frame so (no bridge reaches
+    its nearest frame) goes on its nearest frame as it is, so that its place in the track
+    is in the file; where two or more such points are nearest one frame (all within one
+    frame period, no frame between them), the frame holds the one nearest its time, the
+    track's position there to within the least time (nearest-neighbour resampling), and
+    the others are counted: ``nearer``, said by ``pslog export``. Points of one time
+    (cameras firing together) are first made one, their mean."""
     order = np.argsort(time_ns, kind="stable")
     t, inverse, count = np.unique(np.asarray(time_ns, np.int64)[order], return_inverse=True,
                                   return_counts=True)
@@ -497,13 +633,19 @@ def _resample(time_ns: np.ndarray, position: np.ndarray, residual: np.ndarray,
     np.add.at(res, inverse, np.asarray(residual, np.float64)[order])
     res /= count
     if len(t) == 0:
-        return np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0)
+        return np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0), 0
     after = np.searchsorted(t, frame_ns, side="left")  # first point at or after the frame
     exact = (after < len(t)) & (t[np.minimum(after, len(t) - 1)] == frame_ns)
     inside = (after > 0) & (after < len(t))
     a = np.clip(after - 1, 0, len(t) - 1)
     b = np.clip(after, 0, len(t) - 1)
     inside &= (t[b] - t[a]) <= bridge_ns
+    if withheld is not None and len(withheld):  # no bridge across a point the method withheld
+        inside &= (np.searchsorted(withheld, t[b], side="left")
+                   == np.searchsorted(withheld, t[a], side="right"))
+    if missed is not None and len(missed):  # nor across frames without the ball, but one
+        inside &= (np.searchsorted(missed, t[b], side="left")
+                   - np.searchsorted(missed, t[a], side="right")) <= C3D_BRIDGE_MISSED
     frames = np.flatnonzero(exact | inside)
     a, b = a[frames], b[frames]
     w = np.where(exact[frames], 1.0,
@@ -511,18 +653,21 @@ def _resample(time_ns: np.ndarray, position: np.ndarray, residual: np.ndarray,
     out_pos = pos[a] + w[:, None] * (pos[b] - pos[a])
     out_res = res[a] + w * (res[b] - res[a])
     # a point with no neighbour within the bridge (a lone point between gaps) is on no
-    # frame yet: on its nearest frame, as it is (the nearest in time of such points there)
+    # frame yet: on its nearest frame, as it is (the nearest in time of such points there;
+    # the others counted)
     period = float(frame_ns[1] - frame_ns[0]) if len(frame_ns) > 1 else 1.0
     near = np.clip(np.round((t - frame_ns[0]) / period).astype(np.int64), 0,
                    len(frame_ns) - 1)
     lone = np.flatnonzero(~np.isin(near, frames))
+    nearer = 0
     if len(lone):
         lone = lone[np.lexsort((np.abs(t[lone] - frame_ns[near[lone]]), near[lone]))]
-        lone = lone[np.r_[True, near[lone][1:] != near[lone][:-1]]]
+        first = np.r_[True, near[lone][1:] != near[lone][:-1]]
+        nearer = int(np.count_nonzero(~first))
+        lone = lone[first]
         frames = np.concatenate([frames, near[lone]])
         out_pos = np.concatenate([out_pos, pos[lone]])
         out_res = np.concatenate([out_res, res[lone]])
         order = np.argsort(frames)
         frames, out_pos, out_res = frames[order], out_pos[order], out_res[order]
-    return frames, out_pos, out_res
-
+    return frames, out_pos, out_res, nearer

@@ -105,9 +105,17 @@ def read_truth_file(path: str | Path) -> TruthFile:
                          f"or a TUM file; a session's own truth needs no --truth)")
 
     def binary(byte: int, why: str = "is not UTF-8 text") -> InputError:
+        if data.startswith(b"PAR1"):
+            return InputError(f"{path} is a Parquet file, not a truth trajectory (a CSV "
+                              f"t,x,y,z or a TUM file)")
+        if data[1:2] == b"\x50" and 2 <= data[0] < 128 and path.suffix.lower() == ".c3d":
+            return InputError(f"{path} is a C3D file: --truth reads a CSV t,x,y,z (seconds, "
+                              f"metres) or a TUM trajectory, not C3D; export the marker's "
+                              f"trajectory from your motion-capture software as CSV")
         return InputError(f"{path}: not a text file (byte {byte} {why}); expected a CSV "
                           f"t,x,y,z or a TUM trajectory")
 
+    data = b""
     try:
         with open(path, "rb") as handle:
             # (its first MiB judged before the rest is read: a video given by mistake, GBs,

@@ -335,6 +335,14 @@ def read_detections_csv(path, rig: Rig, camera: str | None = None,
             raise InputError(f"{path} is an MCAP session, not a detections CSV (export "
                              f"its detections with 'pslog export {shell_word(path)} "
                              f"--detections DET.csv')")
+        if head.startswith(b"PAR1"):  # (--parquet's; any Parquet file)
+            raise InputError(f"{path} is a Parquet file ('pslog export --parquet' writes the "
+                             f"fused tracks as one), not a detections CSV (header {expected})")
+        if head[1:2] == b"\x50" and 2 <= head[0] < 128 and str(path).lower().endswith(
+                ".c3d"):  # (a C3D: its first parameter block, then the key 0x50)
+            raise InputError(f"{path} is a C3D file (motion-capture points: 'pslog export "
+                             f"--c3d' writes the fused tracks as one), not a detections CSV "
+                             f"(header {expected}); pslog imports detections, not C3D")
         raise InputError(f"{path}: not a text CSV file (byte {nul} is a NUL); expected "
                          f"header {expected}")
     with handle:
@@ -378,6 +386,11 @@ def read_detections_csv(path, rig: Rig, camera: str | None = None,
             header = [columns.get(h, h) for h in own]
         unknown = [h for h in header if h not in DETECTION_COLUMNS]
         missing = [h for h in required if h not in header]
+        if header and header[0].startswith("#") and "timestamp tx ty tz" in header[0]:
+            raise InputError(f"{path} holds a TUM trajectory (timestamp tx ty tz qx qy qz "
+                             f"qw: 'pslog export --tum'), not detections: a detections CSV "
+                             f"is header camera,time,u,v ('pslog export SESSION.mcap "
+                             f"--detections DET.csv' writes one)")
         if tuple(header[:len(TRACK_COLUMNS)]) == TRACK_COLUMNS:  # (pslog export --csv's)
             raise InputError(f"{path} holds fused tracks ({','.join(TRACK_COLUMNS)}: "
                              f"'pslog export --csv'), not detections: a detections CSV "
