@@ -89,6 +89,23 @@ def _residual(rows, c, px, py, pz, has_cov, c0, c1, c2, c3, c4, c5, t_ns, prev_n
     return res > sigmas * sigma_r + model
 
 
+@kernel(inline=True)
+def _after(rows_c, r, at_row, c):
+    """``np.searchsorted(rows_c, r, side="right")`` (``rows_c`` sorted), found from camera
+    ``c``'s last answer ``at_row[c]`` onward (and kept there): the points come in row order,
+    so each camera's index only moves forward, a step or two a point (a binary search over
+    a camera's rows where the rows went back)."""
+    j = at_row[c]
+    nc = rows_c.shape[0]
+    if j > nc or (j > 0 and rows_c[j - 1] > r):
+        j = np.searchsorted(rows_c, r, side="right")
+    else:
+        while j < nc and rows_c[j] <= r:
+            j += 1
+    at_row[c] = j
+    return j
+
+
 @kernel
 def confirm_kernel(rows, time_ns, camera, uv, row, at, point, has_cov, cov, gap_s, span_s,
                    sigma, stated, max_gap_ns, by_camera, starts, sigmas, first, sides, nearer,
@@ -115,6 +132,7 @@ def confirm_kernel(rows, time_ns, camera, uv, row, at, point, has_cov, cov, gap_
     m = rows.shape[0]
     n = time_ns.shape[0]
     c0 = c1 = c2 = c3 = c4 = c5 = 0.0
+    at_row = np.zeros(m, dtype=np.int64)  # each camera's last index found (:func:`_after`)
     for i in range(k):
         pi = at[i]
         ei = row[pi]
@@ -139,7 +157,9 @@ def confirm_kernel(rows, time_ns, camera, uv, row, at, point, has_cov, cov, gap_
                 cr = camera[r]
                 if cr != ce:
                     lo = starts[cr]
-                    j = np.searchsorted(by_camera[lo:starts[cr + 1]], ei, side="left")
+                    # (c's rows before the point's: searchsorted's index, side either: the
+                    # point's row is another camera's)
+                    j = _after(by_camera[lo:starts[cr + 1]], ei, at_row, cr)
                     if j >= 1:
                         b = by_camera[lo + j - 1]
                         if (t - time_ns[b] <= max_gap_ns and math.isfinite(uv[b, 0])
@@ -163,7 +183,7 @@ def confirm_kernel(rows, time_ns, camera, uv, row, at, point, has_cov, cov, gap_
             if nc == 0 or ce == c:
                 continue
             rows_c = by_camera[lo:hi]
-            j = np.searchsorted(rows_c, ei, side="right")  # c's first row after the point's
+            j = _after(rows_c, ei, at_row, c)  # c's first row after the point's
             if j < 1 or j >= nc:
                 continue
             p1, n1 = rows_c[j - 1], rows_c[j]
