@@ -84,7 +84,7 @@ from pslog.simulation import SimulationOptions, simulate
 from pslog.timing import observations
 
 names = ("_run", "_window_fit", "_turn_window_fit", "_pixel_rows", "_combined_point",
-         "_point", "_withheld", "_lengths")
+         "_point", "_withheld", "_lengths", "_kept_columns")
 filter_module._preload()  # as pslog fuse's preload thread runs it (its errors unseen there)
 print(*(len(getattr(filter_module, k).signatures) for k in names))
 rig = apply_timing(builtin_rig("paper3"), "typeA")
@@ -102,4 +102,35 @@ def test_filter_preload_loads_the_batch_filters_kernels_in_their_signatures():
     run = subprocess.run([sys.executable, "-c", _FILTER_PRELOAD], capture_output=True,
                          text=True, timeout=900)
     assert run.returncode == 0, run.stderr
-    assert run.stdout.splitlines() == ["1 1 1 1 1 1 1 1", "1 1 1 1 1 1 1 1"]
+    assert run.stdout.splitlines() == ["1 1 1 1 1 1 1 1 1", "1 1 1 1 1 1 1 1 1"]
+
+
+_TYPE_A_PRELOAD = """
+from pslog.fusion import FusionOptions, _pseudo_kernel, for_session, fuse
+from pslog.motion import rally_motion
+from pslog.rig import apply_timing, builtin_rig
+from pslog.simulation import SimulationOptions, simulate
+
+names = ("type_a_kernel", "brackets_kernel", "bend_rows", "previous_next", "long_gap_kernel",
+         "checkpoint_noise_kernel", "residual_norms_kernel", "window_mean_squares_kernel",
+         "model_rescale_kernel")
+_pseudo_kernel._preload()  # as pslog fuse's preload thread runs it (its errors unseen there)
+print(*(len(getattr(_pseudo_kernel, k).signatures) for k in names))
+rig = apply_timing(builtin_rig("paper3"), "typeA")
+detections, _ = simulate(rig, rally_motion(seed=1, duration=3.0), 3.0,
+                         SimulationOptions(noise_px=0.3, seed=2))
+fuse(detections, rig, "typeA", for_session(FusionOptions(), {}))  # pslog fuse's type A
+print(*(len(getattr(_pseudo_kernel, k).signatures) for k in names))
+"""
+
+
+def test_type_a_preload_loads_the_batch_kernels_in_their_signatures():
+    # (session 44) type A's kernels, loaded on pslog fuse's preload thread: a signature
+    # that does not match the batch's arguments would compile one no run uses (and leave
+    # the real one's load on type A's way)
+    run = subprocess.run([sys.executable, "-c", _TYPE_A_PRELOAD], capture_output=True,
+                         text=True, timeout=900)
+    assert run.returncode == 0, run.stderr
+    preloaded, after = run.stdout.splitlines()
+    assert all(int(n) >= 1 for n in preloaded.split())
+    assert after == preloaded

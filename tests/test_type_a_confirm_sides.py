@@ -134,7 +134,8 @@ def test_kicks_is_the_offline_default_and_on_the_causal_form(tmp_path, cli):
 
 def test_the_compiled_test_decides_as_the_numpy_one(monkeypatch):
     """``confirm._sides_compiled`` (the kernel ``pslog fuse`` runs) against
-    ``confirm.sides_test`` (numpy, the test's statement) on every call of dirty sessions:
+    ``confirm.sides_test`` (numpy, the test's statement) on the points of every
+    confirmation of dirty sessions:
     paper3 at 0.3 px, and a distorting 4-camera ring at 1 px with misses and drops, both
     with spurious blobs (gated, and best-scored without a covariance): the same decisions,
     bit for bit."""
@@ -144,14 +145,18 @@ def test_the_compiled_test_decides_as_the_numpy_one(monkeypatch):
     from pslog.motion import rally_motion
 
     calls = []
-    compiled = confirm._sides_compiled
+    tests = confirm._tests_compiled
 
-    def both(*args):
-        got = compiled(*args)
-        calls.append((got, confirm.sides_test(*args)))
-        return got
+    def both(*args):  # (session 44: the kernel runs the first camera's test too)
+        (rows, time_ns, camera, uv, row, idx, point, cov, gap_s, span_s, sigma, noise_px,
+         max_gap_ns, _sides) = args
+        cov_k = None if cov is None else np.stack([c[idx] for c in cov], axis=1)
+        sides = (rows, time_ns, camera, uv, row[idx], point[idx], cov_k, gap_s[idx],
+                 span_s[idx], sigma[idx], noise_px, max_gap_ns)
+        calls.append((confirm._sides_compiled(*sides), confirm.sides_test(*sides)))
+        return tests(*args)
 
-    monkeypatch.setattr(confirm, "_sides_compiled", both)
+    monkeypatch.setattr(confirm, "_tests_compiled", both)
     for rig, noise, misses in ((apply_timing(builtin_rig("paper3"), "typeA"), 0.3, 0.0),
                                (ring_rig(4, "lab4"), 1.0, 0.2)):
         det = simulate(rig, rally_motion(7, 6.0), 6.0, SimulationOptions(
@@ -333,14 +338,14 @@ def test_pslog_fuse_preloads_the_compiled_test_in_the_signature_it_runs():
     Now preloaded, in the signature a session's call uses (no other one loaded after)."""
     import pslog.fusion.confirm as confirm
     from pslog.fusion import METHODS
-    from pslog.fusion._confirm_kernel import _preload, sides_kernel
+    from pslog.fusion._confirm_kernel import _preload, confirm_kernel
 
     assert "pslog.fusion._confirm_kernel" in METHODS["typeA"].kernels
     _preload()
-    loaded = list(sides_kernel.signatures)
+    loaded = list(confirm_kernel.signatures)
     assert len(loaded) >= 1
     calls = []
-    compiled = confirm._sides_compiled
+    compiled = confirm._tests_compiled
 
     def spy(*args):
         calls.append(args)
@@ -348,11 +353,12 @@ def test_pslog_fuse_preloads_the_compiled_test_in_the_signature_it_runs():
 
     rig, det, _truth, _ = _session()
     try:
-        confirm._sides_compiled = spy
+        confirm._tests_compiled = spy
         fuse(det, rig, "typeA", SIDES)
-        fuse(det.best(), rig, "typeA", FusionOptions(confirm_every=True, confirm_sides=True,
+        fuse(det.best(), rig, "typeA", FusionOptions(confirm_every=True, confirm_sides=False,
                                                      noise_px=None))
     finally:
-        confirm._sides_compiled = compiled
+        confirm._tests_compiled = compiled
     assert len(calls) == 2
-    assert list(sides_kernel.signatures) == loaded
+    # (every array handed read-only, whatever the caller's: one signature; session 44)
+    assert list(confirm_kernel.signatures) == loaded

@@ -1,5 +1,6 @@
-"""Type A's offline kick test, compiled with numba: :func:`pslog.fusion.confirm.sides_test`
-point by point.
+"""Type A's offline confirmation, compiled with numba: :func:`pslog.fusion.confirm.sides_test`
+and the first confirming camera's test (:func:`pslog.fusion.confirm._tests_numpy`) point by
+point.
 
 :func:`~pslog.fusion.confirm.sides_test` (numpy over the points, a loop over the cameras)
 states the test; on a session it made ~100 column operations per camera, 4-5x type A's own
@@ -8,7 +9,10 @@ kernel loops over the points and cameras instead, doing for each exactly the ari
 those columns, in the same order (so the same decisions, to the bit:
 ``tests/test_type_a_confirm_sides.py`` runs both). The module's switches
 (``CONFIRM_SIGMAS``, ``SIDES_NEARER``, ``SIDES_PROVEN_M``) are arguments, read at each call,
-not constants frozen at compile time.
+not constants frozen at compile time. Session 44: the first confirming camera's search and
+test in the same loop (numpy's search over every point at each row after them, its (k,)
+gathers and ~60 column operations of ``residual_test`` were 0.5 of type A's ~1.2 CPU s at
+90 minutes; ``tests/test_type_a_confirm_compiled.py`` runs both).
 
 Imported lazily (numba compiles on first use).
 """
@@ -29,10 +33,11 @@ _NS2 = float(_NS ** 2)
 
 
 @kernel
-def _residual(rows, c, px, py, pz, has_cov, cov_i, t_ns, prev_ns, next_ns, up0, up1, un0,
-              un1, gap_s, span_s, sigma, stated, sigmas):
-    """:func:`pslog.fusion.confirm.residual_test` for one point and camera ``c``: True when
-    the camera contradicts the point (NaN: not)."""
+def _residual(rows, c, px, py, pz, has_cov, c0, c1, c2, c3, c4, c5, t_ns, prev_ns, next_ns,
+              up0, up1, un0, un1, gap_s, span_s, sigma, stated, sigmas):
+    """:func:`pslog.fusion.confirm.residual_test` for one point and camera ``c`` (``c0..c5``
+    its covariance xx, yy, zz, xy, xz, yz): True when the camera contradicts the point (NaN:
+    not)."""
     r5, r6, r7 = rows[c, 5], rows[c, 6], rows[c, 7]
     x = r5 * px + r6 * py + r7 * pz + rows[c, 14]
     y = rows[c, 8] * px + rows[c, 9] * py + rows[c, 10] * pz + rows[c, 15]
@@ -63,8 +68,8 @@ def _residual(rows, c, px, py, pz, has_cov, cov_i, t_ns, prev_ns, next_ns, up0, 
         jv0 = fy * rows[c, 8] / z - fy * y * rows[c, 11] / (z * z)
         jv1 = fy * rows[c, 9] / z - fy * y * rows[c, 12] / (z * z)
         jv2 = fy * rows[c, 10] / z - fy * y * rows[c, 13] / (z * z)
-        cxx, cyy, czz = cov_i[0] * scale, cov_i[1] * scale, cov_i[2] * scale
-        cxy, cxz, cyz = cov_i[3] * scale, cov_i[4] * scale, cov_i[5] * scale
+        cxx, cyy, czz = c0 * scale, c1 * scale, c2 * scale
+        cxy, cxz, cyz = c3 * scale, c4 * scale, c5 * scale
         a = (ju0 * (cxx * ju0 + cxy * ju1 + cxz * ju2)
              + ju1 * (cxy * ju0 + cyy * ju1 + cyz * ju2)
              + ju2 * (cxz * ju0 + cyz * ju1 + czz * ju2)) + interp
@@ -84,34 +89,101 @@ def _residual(rows, c, px, py, pz, has_cov, cov_i, t_ns, prev_ns, next_ns, up0, 
     return res > sigmas * sigma_r + model
 
 
+@kernel(inline=True)
+def _after(rows_c, r, at_row, c):
+    """``np.searchsorted(rows_c, r, side="right")`` (``rows_c`` sorted), found from camera
+    ``c``'s last answer ``at_row[c]`` onward (and kept there): the points come in row order,
+    so each camera's index only moves forward, a step or two a point (a binary search over
+    a camera's rows where the rows went back)."""
+    j = at_row[c]
+    nc = rows_c.shape[0]
+    if j > nc or (j > 0 and rows_c[j - 1] > r):
+        j = np.searchsorted(rows_c, r, side="right")
+    else:
+        while j < nc and rows_c[j] <= r:
+            j += 1
+    at_row[c] = j
+    return j
+
+
 @kernel
-def sides_kernel(rows, time_ns, camera, uv, e, point, has_cov, cov, gap_s, span_s, sigma,
-                 stated, max_gap_ns, by_camera, starts, sigmas, nearer, proven_m, bad,
-                 checked):
-    """:func:`pslog.fusion.confirm.sides_test` for k points into ``bad`` and ``checked``
-    (k,) bool (written; the arguments as there, plus: ``has_cov`` whether ``cov`` (k, 6) is
-    the points' covariance, ``stated`` the stated noise (0: none), ``by_camera`` the rows
-    of each camera in order, camera ``c``'s at ``by_camera[starts[c]:starts[c + 1]]``,
-    ``sigmas`` :data:`~pslog.fusion.confirm.CONFIRM_SIGMAS`, ``nearer``
+def confirm_kernel(rows, time_ns, camera, uv, row, at, point, has_cov, cov, gap_s, span_s,
+                   sigma, stated, max_gap_ns, by_camera, starts, sigmas, first, sides, nearer,
+                   proven_m, first_bad, ok, bad, checked):
+    """:func:`pslog.fusion.confirm.confirm_batch`'s tests of k points, compiled: with
+    ``first``, the first confirming camera's interpolation (the confirming row found as
+    ``confirm_batch``'s numpy search finds it, the test :func:`pslog.fusion.confirm.
+    residual_test`'s) into ``first_bad`` and ``ok`` (k,) bool (``ok``: a confirming row
+    found; ``first_bad`` False without one); with ``sides``, :func:`pslog.fusion.confirm.
+    sides_test` into ``bad`` and ``checked`` (k,) bool. Each output written only where its
+    test runs.
+
+    The i-th point's values are at ``at[i]`` of the per-point arrays: ``row`` (its row in
+    the observations), ``point`` (., 3), ``cov`` (six (.,) columns xx, yy, zz, xy, xz, yz;
+    read only with ``has_cov``), ``gap_s``, ``span_s``, ``sigma`` (so the track's own
+    columns are read without a gather). ``rows``, ``time_ns``, ``camera``, ``uv``,
+    ``stated``, ``max_gap_ns`` as :func:`~pslog.fusion.confirm.sides_test`'s (``stated``
+    the stated noise, 0: none); ``by_camera`` the rows of each camera in order, camera
+    ``c``'s at ``by_camera[starts[c]:starts[c + 1]]``; ``sigmas``
+    :data:`~pslog.fusion.confirm.CONFIRM_SIGMAS`, ``nearer``
     :data:`~pslog.fusion.confirm.SIDES_NEARER`, ``proven_m``
-    :data:`~pslog.fusion.confirm.SIDES_PROVEN_M` (NaN: off))."""
-    k = e.shape[0]
+    :data:`~pslog.fusion.confirm.SIDES_PROVEN_M` (NaN: off)."""
+    k = at.shape[0]
     m = rows.shape[0]
+    n = time_ns.shape[0]
+    c0 = c1 = c2 = c3 = c4 = c5 = 0.0
+    at_row = np.zeros(m, dtype=np.int64)  # each camera's last index found (:func:`_after`)
     for i in range(k):
-        bad[i] = False
-        checked[i] = False
-        ei = e[i]
+        pi = at[i]
+        ei = row[pi]
         t = time_ns[ei]
         tt = float(t)
-        px, py, pz = point[i, 0], point[i, 1], point[i, 2]
-        sg = sigma[i]
+        px, py, pz = point[pi, 0], point[pi, 1], point[pi, 2]
+        sg = sigma[pi]
+        gs, ss = gap_s[pi], span_s[pi]
+        if has_cov:
+            c0, c1, c2 = cov[0][pi], cov[1][pi], cov[2][pi]
+            c3, c4, c5 = cov[3][pi], cov[4][pi], cov[5][pi]
+        ce = camera[ei]
+        if first:
+            # the confirming detection: the first later row of another camera that can
+            # check the point (its camera's latest row before the point's within
+            # max_gap_ns of it, both pixels finite), within max_gap_ns of the point
+            found = False
+            r = ei + 1
+            b = -1
+            cr = -1
+            while r < n and time_ns[r] - t <= max_gap_ns:
+                cr = camera[r]
+                if cr != ce:
+                    lo = starts[cr]
+                    # (c's rows before the point's: searchsorted's index, side either: the
+                    # point's row is another camera's)
+                    j = _after(by_camera[lo:starts[cr + 1]], ei, at_row, cr)
+                    if j >= 1:
+                        b = by_camera[lo + j - 1]
+                        if (t - time_ns[b] <= max_gap_ns and math.isfinite(uv[b, 0])
+                                and math.isfinite(uv[b, 1]) and math.isfinite(uv[r, 0])
+                                and math.isfinite(uv[r, 1])):
+                            found = True
+                            break
+                r += 1
+            ok[i] = found
+            first_bad[i] = found and _residual(
+                rows, cr, px, py, pz, has_cov, c0, c1, c2, c3, c4, c5, t, time_ns[b],
+                time_ns[r], uv[b, 0], uv[b, 1], uv[r, 0], uv[r, 1], gs, ss, sg, stated,
+                sigmas)
+        if not sides:
+            continue
+        bad[i] = False
+        checked[i] = False
         for c in range(m):
             lo, hi = starts[c], starts[c + 1]
             nc = hi - lo
-            if nc == 0 or camera[ei] == c:
+            if nc == 0 or ce == c:
                 continue
             rows_c = by_camera[lo:hi]
-            j = np.searchsorted(rows_c, ei, side="right")  # c's first row after the point's
+            j = _after(rows_c, ei, at_row, c)  # c's first row after the point's
             if j < 1 or j >= nc:
                 continue
             p1, n1 = rows_c[j - 1], rows_c[j]
@@ -168,9 +240,9 @@ def sides_kernel(rows, time_ns, camera, uv, e, point, has_cov, cov, gap_s, span_
                 ra, rb = (n1, n2) if before else (p2, p1)
             else:
                 ra, rb = p1, n1
-            verdict = _residual(rows, c, px, py, pz, has_cov, cov[i], t, time_ns[ra],
-                                time_ns[rb], uv[ra, 0], uv[ra, 1], uv[rb, 0], uv[rb, 1],
-                                gap_s[i], span_s[i], sg, stated, sigmas)
+            verdict = _residual(rows, c, px, py, pz, has_cov, c0, c1, c2, c3, c4, c5, t,
+                                time_ns[ra], time_ns[rb], uv[ra, 0], uv[ra, 1], uv[rb, 0],
+                                uv[rb, 1], gs, ss, sg, stated, sigmas)
             if not math.isnan(proven_m):
                 # the distance the camera proves: the residual less the reference's own
                 # noise and model bound, over the pixels per metre across its ray
@@ -188,15 +260,20 @@ def sides_kernel(rows, time_ns, camera, uv, e, point, has_cov, cov, gap_s, span_
 
 
 def _preload() -> None:
-    """:func:`sides_kernel` (and :func:`_residual`) loaded from numba's cache (or compiled)
-    now, in the signature of :func:`pslog.fusion.confirm._sides_compiled`'s call: called by
+    """:func:`confirm_kernel` (and :func:`_residual`) loaded from numba's cache (or
+    compiled) now, in the one signature :func:`pslog.fusion.confirm._run_kernel` calls it
+    in (every array read-only and C-contiguous, the cameras int32): called by
     :func:`pslog._jit.preload` on its thread while ``pslog fuse`` reads its session, so that
-    type A's offline confirmation (the default) does not pay the load (~20 ms) on its way
-    (the observations' times are read-only: another signature than a writable array's)."""
-    time_ns = np.zeros(0, dtype=np.int64)
-    time_ns.flags.writeable = False
-    sides_kernel(np.zeros((1, 17)), time_ns, np.zeros(0, dtype=np.int64),
-                 np.zeros((0, 2)), np.zeros(0, dtype=np.int64), np.zeros((0, 3)), False,
-                 np.zeros((0, 6)), np.zeros(0), np.zeros(0), np.zeros(0), 0.0, 0,
-                 np.zeros(0, dtype=np.int64), np.zeros(2, dtype=np.int64), 4.0, True, np.nan,
-                 np.empty(0, dtype=np.bool_), np.empty(0, dtype=np.bool_))
+    type A's offline confirmation (the default) does not pay the load (~20 ms) on its way."""
+    def ro(a):
+        a.flags.writeable = False
+        return a
+
+    f, i = np.float64, np.int64
+    confirm_kernel(ro(np.zeros((1, 17))), ro(np.zeros(0, dtype=i)),
+                   ro(np.zeros(0, dtype=np.int32)), ro(np.zeros((0, 2))),
+                   ro(np.zeros(0, dtype=i)), ro(np.zeros(0, dtype=i)), ro(np.zeros((0, 3))),
+                   False, tuple(ro(np.zeros(0, dtype=f)) for _ in range(6)),
+                   ro(np.zeros(0)), ro(np.zeros(0)), ro(np.zeros(0)), 0.0, 0,
+                   ro(np.zeros(0, dtype=i)), ro(np.zeros(2, dtype=i)), 4.0, True, True, True,
+                   np.nan, *(np.empty(0, dtype=np.bool_) for _ in range(4)))

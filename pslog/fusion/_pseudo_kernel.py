@@ -1563,3 +1563,38 @@ def one_point_kernel(depth, max_extrapolation, max_gap_ns, time_ns, camera, uv,
                         no_rows)
         decided[0], decided[1], decided[2], decided[3] = finite, good, failed, kinked[0]
     return made
+
+
+def _preload() -> None:
+    """Type A's batch kernels loaded from numba's cache (or compiled) now, in the
+    signatures ``pslog fuse``'s type A calls them with (the observations' columns
+    read-only; C-contiguous arrays of its own; Python ints, floats and bools): called by
+    :func:`pslog._jit.preload` on its thread while ``pslog fuse`` reads its session and
+    gates it, so that type A's first calls do not pay the nine loads (~35 CPU ms, more
+    wall where the compiler lock makes a load wait) on its way (session 44). Nothing
+    runs: ``compile`` of a signature only loads it (tests/test_kernel_signatures.py: a
+    type A fuse afterwards adds no signature)."""
+    from numba import types
+
+    f8, i8, b1 = types.float64, types.int64, types.boolean
+
+    def a(dtype, ndim: int, readonly: bool = False):
+        return types.Array(dtype, ndim, "C", readonly=readonly)
+
+    iv, v, m, m3 = a(i8, 1), a(f8, 1), a(f8, 2), a(f8, 3)
+    ro_t, ro_c, ro_uv = a(i8, 1, True), a(types.int32, 1, True), a(f8, 2, True)
+    type_a_kernel.compile((
+        iv, iv, i8, f8, i8, ro_t, ro_c, a(i8, 2), a(i8, 2), m, m, m, m, m, m, m, i8, f8, m,
+        m3, m, b1, m, i8, f8, b1, m3, a(i8, 3), iv, a(b1, 1), m, m, iv, v, v, v, m,
+        a(i8, 3), m3, b1, f8, v, i8, m, iv, iv, v, v, a(b1, 1), iv, iv, v))
+    brackets_kernel.compile((ro_t, ro_c, a(i8, 2), a(i8, 2), iv))
+    bend_rows.compile((ro_t, m, iv, iv, i8, v, v))
+    previous_next.compile((iv, i8, iv, iv))
+    long_gap_kernel.compile((ro_t, ro_c, i8, iv, iv, ro_t, ro_c, i8, f8, b1, iv, iv,
+                             a(b1, 1)))
+    checkpoint_noise_kernel.compile((ro_t, ro_c, ro_uv, v, i8, i8, i8, i8, i8, i8, f8, ro_t,
+                                     v))
+    residual_norms_kernel.compile((ro_t, iv, ro_uv, v, i8, i8, i8, iv, v))
+    window_mean_squares_kernel.compile((iv, v, iv, i8, i8, v))
+    model_rescale_kernel.compile((m, v, f8, a(f8, 1, True), a(f8, 1, True), a(f8, 1, True),
+                                  a(f8, 2, True), iv, m, f8, m))

@@ -373,34 +373,146 @@ def sides_test(rows: np.ndarray, time_ns: np.ndarray, camera: np.ndarray, uv: np
     return bad, checked
 
 
+def _readonly(a: np.ndarray, dtype) -> np.ndarray:
+    """``a`` as a C-contiguous read-only array of ``dtype`` (a view where it is one
+    already): :func:`pslog.fusion._confirm_kernel.confirm_kernel` called in one signature
+    whoever calls it (numba compiles one per dtype, layout and writability)."""
+    a = np.ascontiguousarray(a, dtype=dtype).view()
+    a.flags.writeable = False
+    return a
+
+
+def _camera_order(camera: np.ndarray, m: int) -> tuple[np.ndarray, np.ndarray]:
+    """Each camera's rows in order, camera ``c``'s at ``by_camera[starts[c]:starts[c + 1]]``
+    ((n,) int64 and (m + 1,) int64; the rows of a camera index outside ``[0, m)`` left
+    out)."""
+    per = [np.flatnonzero(camera == c) for c in range(m)]
+    starts = np.zeros(m + 1, dtype=np.int64)
+    np.cumsum([len(p) for p in per], out=starts[1:])
+    by_camera = np.concatenate(per) if per else np.zeros(0, dtype=np.int64)
+    return by_camera.astype(np.int64, copy=False), starts
+
+
+def _run_kernel(rows: np.ndarray, time_ns: np.ndarray, camera: np.ndarray, uv: np.ndarray,
+                row: np.ndarray, at: np.ndarray, point: np.ndarray, cov, gap_s: np.ndarray,
+                span_s: np.ndarray, sigma: np.ndarray, noise_px: float | None,
+                max_gap_ns: int, first: bool, sides: bool) -> tuple[np.ndarray, ...]:
+    """:func:`pslog.fusion._confirm_kernel.confirm_kernel`'s call (its arguments as there;
+    ``cov`` six columns or None); the module's switches read now. Returns ``(first_bad,
+    ok, bad, checked)``, (k,) bool each (the tests not run: unset)."""
+    from ._confirm_kernel import confirm_kernel  # (numba: imported at the first use)
+
+    k, m = len(at), len(rows)
+    camera = np.asarray(camera)
+    by_camera, starts = _camera_order(camera, m)
+    f64, i64 = np.float64, np.int64
+    columns = (tuple(_readonly(c, f64) for c in cov) if cov is not None
+               else (_readonly(np.zeros(0), f64),) * 6)
+    out = tuple(np.empty(k, dtype=np.bool_) for _ in range(4))
+    confirm_kernel(_readonly(rows, f64), _readonly(time_ns, i64), _readonly(camera, np.int32),
+                   _readonly(uv, f64), _readonly(row, i64), _readonly(at, i64),
+                   _readonly(point, f64), cov is not None, columns, _readonly(gap_s, f64),
+                   _readonly(span_s, f64), _readonly(sigma, f64),
+                   0.0 if noise_px is None else float(noise_px), int(max_gap_ns),
+                   _readonly(by_camera, i64), _readonly(starts, i64), float(CONFIRM_SIGMAS),
+                   bool(first), bool(sides), bool(SIDES_NEARER),
+                   np.nan if SIDES_PROVEN_M is None else float(SIDES_PROVEN_M), *out)
+    return out
+
+
 def _sides_compiled(rows: np.ndarray, time_ns: np.ndarray, camera: np.ndarray,
                     uv: np.ndarray, e: np.ndarray, point: np.ndarray, cov: np.ndarray | None,
                     gap_s: np.ndarray, span_s: np.ndarray, sigma: np.ndarray,
                     noise_px: float | None, max_gap_ns: int) -> tuple[np.ndarray, np.ndarray]:
     """:func:`sides_test`, the same decisions, by the compiled kernel
-    (:func:`pslog.fusion._confirm_kernel.sides_kernel`: a loop over points and cameras
+    (:func:`pslog.fusion._confirm_kernel.confirm_kernel`: a loop over points and cameras
     instead of ~100 column operations per camera); the module's switches read now."""
-    from ._confirm_kernel import sides_kernel  # (numba: imported at the first use)
+    k = len(e)
+    columns = None if cov is None else [np.asarray(cov)[:, i] for i in range(6)]
+    out = _run_kernel(rows, time_ns, camera, uv, e, np.arange(k, dtype=np.int64), point,
+                      columns, gap_s, span_s, sigma, noise_px, max_gap_ns, False, True)
+    return out[2], out[3]
 
-    k, m = len(e), len(rows)
-    camera = np.asarray(camera)
-    by_camera = np.argsort(camera, kind="stable").astype(np.int64)  # each camera's rows, in order
-    starts = np.zeros(m + 1, dtype=np.int64)
-    np.cumsum(np.bincount(camera, minlength=m)[:m], out=starts[1:])
-    bad = np.empty(k, dtype=np.bool_)
-    checked = np.empty(k, dtype=np.bool_)
-    sides_kernel(np.ascontiguousarray(rows, dtype=np.float64),
-                 np.ascontiguousarray(time_ns, dtype=np.int64), camera.astype(np.int64),
-                 np.ascontiguousarray(uv, dtype=np.float64), np.asarray(e, dtype=np.int64),
-                 np.ascontiguousarray(point, dtype=np.float64), cov is not None,
-                 np.zeros((k, 6)) if cov is None else np.ascontiguousarray(cov, np.float64),
-                 np.ascontiguousarray(gap_s, dtype=np.float64),
-                 np.ascontiguousarray(span_s, dtype=np.float64),
-                 np.ascontiguousarray(sigma, dtype=np.float64),
-                 0.0 if noise_px is None else float(noise_px), int(max_gap_ns), by_camera,
-                 starts, float(CONFIRM_SIGMAS), bool(SIDES_NEARER),
-                 np.nan if SIDES_PROVEN_M is None else float(SIDES_PROVEN_M), bad, checked)
-    return bad, checked
+
+def _tests_compiled(rows: np.ndarray, time_ns: np.ndarray, camera: np.ndarray,
+                    uv: np.ndarray, row: np.ndarray, idx: np.ndarray, point: np.ndarray,
+                    cov: list | None, gap_s: np.ndarray, span_s: np.ndarray,
+                    sigma: np.ndarray, noise_px: float | None, max_gap_ns: int,
+                    sides: bool) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_tests_numpy`'s decisions, by the compiled kernel in one pass over the points
+    (no (k,) gathers of the track's columns, no search over all the points at each row
+    after them); the same bits (``tests/test_type_a_confirm_compiled.py``)."""
+    first_bad, ok, bad = _run_kernel(rows, time_ns, camera, uv, row, idx, point, cov, gap_s,
+                                     span_s, sigma, noise_px, max_gap_ns, True, sides)[:3]
+    if sides:
+        return (first_bad | bad) if SIDES_AND_FIRST else bad, ok
+    return first_bad, ok
+
+
+def _tests_numpy(rows: np.ndarray, time_ns: np.ndarray, camera: np.ndarray, uv: np.ndarray,
+                 row: np.ndarray, idx: np.ndarray, point: np.ndarray, cov: list | None,
+                 gap_s: np.ndarray, span_s: np.ndarray, sigma: np.ndarray,
+                 noise_px: float | None, max_gap_ns: int, sides: bool
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`confirm_batch`'s tests of the k waiting points ``idx`` of a track (numpy: the
+    statement :func:`_tests_compiled` follows).
+
+    Parameters
+    ----------
+    rows : (m, 17) float, :func:`_camera_rows`
+    time_ns, camera, uv : the observations' (n,) times (ns), (n,) cameras and (n, 2)
+        undistorted pixels, in (time, camera) order
+    row : (p,) int, each of the track's points' row
+    idx : (k,) int, the points tested, indices into the track
+    point, cov, gap_s, span_s, sigma : the track's (p, 3) points, six (p,) covariance
+        columns (xx, yy, zz, xy, xz, yz; None: none), (p,) gaps and spans (s) and the
+        tests' noise (px): :func:`residual_test`'s
+    noise_px : the stated noise; max_gap_ns : int
+    sides : :func:`sides_test` as well (``confirm_sides``)
+
+    Returns
+    -------
+    (contradicted (k,) bool, ok (k,) bool: a confirming detection found)
+    """
+    n, m = len(time_ns), len(rows)
+    e = row[idx]
+    # the confirming detection: the first later row of another camera that can check the
+    # point (its camera has a row within max_gap_s before the point, both pixels finite),
+    # within max_gap_s of the point; the rows are scanned in order, as a stream meets them
+    finite = np.all(np.isfinite(uv), axis=1)
+    # each row's previous row of its own camera, and each long point's latest row per camera
+    last_before = np.full((len(e), m), -1, dtype=np.int64)
+    for c in range(m):
+        rows_c = np.flatnonzero(camera == c)
+        if len(rows_c) == 0:  # a camera with no detection at all: it confirms nothing
+            continue
+        k = np.searchsorted(rows_c, e, side="left") - 1
+        last_before[:, c] = np.where(k >= 0, rows_c[np.maximum(k, 0)], -1)
+    nxt = np.full(len(e), -1, dtype=np.int64)
+    prev = np.full(len(e), -1, dtype=np.int64)
+    pending = np.ones(len(e), dtype=bool)
+    r = e + 1
+    while pending.any():
+        r_c = np.minimum(r, n - 1)
+        pending &= (r < n) & (time_ns[r_c] - time_ns[e] <= max_gap_ns)  # else unconfirmed
+        before = last_before[np.arange(len(e)), camera[r_c]]
+        b_c = np.maximum(before, 0)
+        found = (pending & (camera[r_c] != camera[e]) & (before >= 0)
+                 & (time_ns[e] - time_ns[b_c] <= max_gap_ns) & finite[b_c] & finite[r_c])
+        nxt[found], prev[found] = r_c[found], before[found]
+        pending &= ~found
+        r += 1
+    ok = nxt >= 0
+    nxt_c, prev_c = np.maximum(nxt, 0), np.maximum(prev, 0)
+    cov_k = None if cov is None else np.stack([c[idx] for c in cov], axis=1)
+    contradicted = residual_test(
+        rows, camera[nxt_c], point[idx], cov_k, time_ns[e], time_ns[prev_c], time_ns[nxt_c],
+        uv[prev_c], uv[nxt_c], gap_s[idx], span_s[idx], sigma[idx], noise_px) & ok
+    if sides:
+        side = sides_test(rows, time_ns, camera, uv, e, point[idx], cov_k, gap_s[idx],
+                          span_s[idx], sigma[idx], noise_px, max_gap_ns)[0]
+        contradicted = (contradicted | side) if SIDES_AND_FIRST else side
+    return contradicted, ok
 
 
 #: Median of |N(0, 1)|: a half-normal's median, in σ.
@@ -480,7 +592,6 @@ def confirm_batch(prep, track: Track, rig, max_gap_s: float, noise_px: float | N
 
     obs = prep.obs
     time_ns, camera = obs.time_ns, obs.camera
-    n = len(time_ns)
     max_gap_ns = int(max_gap_s * NS)
     long_ns = LONG_FACTOR * usual_interval_s(rig) * NS
     # each point's row (its (time, camera) in the (time, camera)-sorted observations), the
@@ -519,49 +630,11 @@ def confirm_batch(prep, track: Track, rig, max_gap_s: float, noise_px: float | N
     # (the tests' noise, a causal median over every point: made only when some point waits)
     if sigma is None:
         sigma = confirm_noise(q["snap_px"], noise_px)
-    e = row[wait]
-    # the confirming detection: the first later row of another camera that can check the
-    # point (its camera has a row within max_gap_s before the point, both pixels finite),
-    # within max_gap_s of the point; the rows are scanned in order, as a stream meets them
-    uv = prep.uv_undistorted
-    finite = np.all(np.isfinite(uv), axis=1)
-    # each row's previous row of its own camera, and each long point's latest row per camera
-    last_before = np.full((len(e), len(rig)), -1, dtype=np.int64)
-    for c in range(len(rig)):
-        rows_c = np.flatnonzero(camera == c)
-        if len(rows_c) == 0:  # a camera with no detection at all: it confirms nothing
-            continue
-        k = np.searchsorted(rows_c, e, side="left") - 1
-        last_before[:, c] = np.where(k >= 0, rows_c[np.maximum(k, 0)], -1)
-    nxt = np.full(len(e), -1, dtype=np.int64)
-    prev = np.full(len(e), -1, dtype=np.int64)
-    pending = np.ones(len(e), dtype=bool)
-    r = e + 1
-    while pending.any():
-        r_c = np.minimum(r, n - 1)
-        pending &= (r < n) & (time_ns[r_c] - time_ns[e] <= max_gap_ns)  # else unconfirmed
-        before = last_before[np.arange(len(e)), camera[r_c]]
-        b_c = np.maximum(before, 0)
-        found = (pending & (camera[r_c] != camera[e]) & (before >= 0)
-                 & (time_ns[e] - time_ns[b_c] <= max_gap_ns) & finite[b_c] & finite[r_c])
-        nxt[found], prev[found] = r_c[found], before[found]
-        pending &= ~found
-        r += 1
-    ok = nxt >= 0
-    nxt_c, prev_c = np.maximum(nxt, 0), np.maximum(prev, 0)
-    cam2 = camera[nxt_c]
     idx = np.flatnonzero(wait)
-    cov = (np.stack([q[k][idx] for k in _COV], axis=1) if all(k in q for k in _COV)
-           else None)
-    contradicted = residual_test(
-        _camera_rows(rig), cam2, track.position_world[idx], cov, time_ns[e],
-        time_ns[prev_c], time_ns[nxt_c], uv[prev_c], uv[nxt_c], gap[wait] / NS,
-        q["span_s"][idx], sigma[idx], noise_px) & ok
-    if sides:
-        side = _sides_compiled(_camera_rows(rig), time_ns, camera, uv, e,
-                               track.position_world[idx], cov, gap[wait] / NS,
-                               q["span_s"][idx], sigma[idx], noise_px, max_gap_ns)[0]
-        contradicted = (contradicted | side) if SIDES_AND_FIRST else side
+    cov = [q[k] for k in _COV] if all(k in q for k in _COV) else None
+    contradicted, ok = _tests_compiled(
+        _camera_rows(rig), time_ns, camera, prep.uv_undistorted, row, idx,
+        track.position_world, cov, gap / NS, q["span_s"], sigma, noise_px, max_gap_ns, sides)
     # (a point that neither bridged a long gap nor waits for its innovation: kept unchecked)
     unconfirmed = ~ok & long[idx]
     drop = np.zeros(len(track), dtype=bool)

@@ -2283,6 +2283,32 @@ def _lengths(rows, q):
 
 
 @kernel
+def _kept_columns(rows, index, times, cameras, q, position, time, camera):
+    """:func:`_rows_track`'s columns of the rows a batch's end keeps, in one pass (session
+    44: :meth:`_Hold.settle`'s copies of the kept rows, times and cameras, then the columns
+    made from them, were two passes over ~130 bytes a point of fresh memory): for each row
+    ``i`` of ``rows`` (n, _OUT_COLS) whose ``index[i]`` is not negative (withdrawn), in order,
+    its detection's ``times`` and ``cameras`` at ``index[i]``, its position into ``position``
+    (k, 3), its quality into ``q`` (FILTER_QUALITY rows, k; the lengths as :func:`_lengths`
+    takes them) and its time and camera into ``time``, ``camera`` (k,). Returns k."""
+    j = 0
+    for i in range(rows.shape[0]):
+        src = index[i]
+        if src < 0:
+            continue
+        position[j, 0], position[j, 1], position[j, 2] = rows[i, 0], rows[i, 1], rows[i, 2]
+        q[0, j], q[1, j], q[2, j], q[3, j] = rows[i, 3], rows[i, 4], rows[i, 5], rows[i, 6]
+        q[4, j] = _py_hypot(rows[i, 7], rows[i, 8])
+        q[5, j] = rows[i, 9] if rows[i, 15] == 1.0 else _py_hypot(rows[i, 9], rows[i, 10])
+        for c in range(5):
+            q[6 + c, j] = rows[i, 11 + c]
+        time[j] = times[src]
+        camera[j] = cameras[src]
+        j += 1
+    return j
+
+
+@kernel
 def _step(S, I, cams, O, N, t, cam, u, v, out):
     """:func:`_push`, then withhold the point (``_POINT`` becomes ``_NONE``) as
     ``BallFilter.push`` does; ``_FIT``/``_FIT_OR_POINT`` are left to Python."""
@@ -3837,6 +3863,16 @@ class _Hold:
         k = self.k
         return self.rows[:k], self.time[:k], self.camera[:k]
 
+    def settle_all(self, index: np.ndarray) -> int:
+        """:meth:`settle` with ``final`` of a push's rows whose ``index`` (n,) is given:
+        the held ones withdrawn (``index`` made negative), none left waiting; returns how
+        many are withdrawn (every row with a negative ``index``; the others leave)."""
+        for k in range(self.n):
+            index[self.pr[k]] = -1 - index[self.pr[k]]
+        self.n = 0
+        self.H[1] = 0
+        return int(np.count_nonzero(index < 0))
+
     def settle(self, rows: np.ndarray, time: np.ndarray, camera: np.ndarray,
                index: np.ndarray, final: bool
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
@@ -3965,13 +4001,35 @@ def _track(flt: BallFilter, time_ns, camera, uv, doubt: np.ndarray | None = None
         i += 1
     hold.n = pn
     rows, index = rows[:n_out], index[:n_out]
-    source = np.abs(index) - (index < 0)  # each row's detection (a withdrawn one's -1 - i: i)
-    rows, time, cams, n_held = hold.settle(rows, times[source], cameras[source], index, final)
     dropped = {k: n - before.get(k, 0) for k, n in flt.dropped.items()
                if n > before.get(k, 0)}
     if n_doubt:
         dropped[DOUBT] = n_doubt
+    if final and _hypot_compiled():
+        # (the end: every row leaves but the withdrawn; their columns made in one pass)
+        return _kept_track(rows, index, times, cameras, hold.settle_all(index), dropped)
+    source = np.abs(index) - (index < 0)  # each row's detection (a withdrawn one's -1 - i: i)
+    rows, time, cams, n_held = hold.settle(rows, times[source], cameras[source], index, final)
     return _rows_track(rows, time, cams, n_held, dropped)
+
+
+def _kept_track(rows: np.ndarray, index: np.ndarray, times: np.ndarray, cameras: np.ndarray,
+                n_held: int, dropped: dict[str, int]) -> Track:
+    """:func:`_rows_track` of the rows (n, _OUT_COLS) whose ``index`` (n,) is not negative,
+    their detections' times and cameras at ``index`` of ``times``, ``cameras``: the same
+    Track (its columns made by :func:`_kept_columns`, where :func:`_hypot_compiled`)."""
+    k = len(index) - n_held
+    q = np.empty((len(FILTER_QUALITY), k))
+    position, time, cams = np.empty((k, 3)), np.empty(k, np.int64), np.empty(k, np.int32)
+    made = _kept_columns(np.ascontiguousarray(rows), np.ascontiguousarray(index, np.int64),
+                         times, cameras, q, position, time, cams)
+    assert made == k
+    for c in (time, position, cams, q):
+        c.setflags(write=False)
+    if n_held:
+        dropped = {**dropped, HELD: n_held}
+    return Track._of_frozen("filter", time, position, cams,
+                            dict(zip(FILTER_QUALITY, q, strict=True)), dropped)
 
 
 def _rows_track(rows: np.ndarray, time: np.ndarray, camera: np.ndarray, n_held: int,
@@ -4047,3 +4105,5 @@ def _preload() -> None:
     _point.compile((v, *(f8,) * 15))
     _withheld.compile((iv, v, f8))
     _lengths.compile((m, m))
+    _kept_columns.compile((m, iv, a(i8, 1, True), a(i8, 1, True), m, m, iv,
+                           a(types.int32, 1)))

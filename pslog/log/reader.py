@@ -1125,6 +1125,8 @@ def _load(buf: np.ndarray, pos: np.ndarray, width: int) -> np.ndarray:
     raw = _windows(buf, width)[pos]
     if width == 8:
         return raw.view("<u8")[:, 0]
+    if width in (2, 4):  # (the rows' bytes read as one little-endian integer each)
+        return raw.view(f"<u{width}")[:, 0].astype(np.uint64)
     out = np.zeros(len(pos), dtype=np.uint64)
     for i in range(width):
         out |= raw[:, i].astype(np.uint64) << np.uint64(8 * i)
