@@ -4024,6 +4024,14 @@ def _kept_track(rows: np.ndarray, index: np.ndarray, times: np.ndarray, cameras:
     made = _kept_columns(np.ascontiguousarray(rows), np.ascontiguousarray(index, np.int64),
                          times, cameras, q, position, time, cams)
     assert made == k
+    return _frozen_track(time, position, cams, q, n_held, dropped)
+
+
+def _frozen_track(time: np.ndarray, position: np.ndarray, cams: np.ndarray, q: np.ndarray,
+                  n_held: int, dropped: dict[str, int]) -> Track:
+    """The filter's Track of its columns (``q``: (len(FILTER_QUALITY), n), one row per
+    quality column), made read-only as Track keeps them (no check, no copy), with ``n_held``
+    points withdrawn (``held``) added to ``dropped``."""
     for c in (time, position, cams, q):
         c.setflags(write=False)
     if n_held:
@@ -4056,12 +4064,7 @@ def _rows_track(rows: np.ndarray, time: np.ndarray, camera: np.ndarray, n_held: 
     q[6:] = rows[:, 11:16].T
     time, position = np.array(time, np.int64), np.ascontiguousarray(rows[:, :3])
     cams = camera.astype(np.int32)
-    for c in (time, position, cams, q):
-        c.setflags(write=False)
-    if n_held:
-        dropped = {**dropped, HELD: n_held}
-    return Track._of_frozen("filter", time, position, cams,
-                            dict(zip(FILTER_QUALITY, q, strict=True)), dropped)
+    return _frozen_track(time, position, cams, q, n_held, dropped)
 
 
 def fuse_filter(obs: Observations, rig: Rig, max_gap_s: float | None = None,
