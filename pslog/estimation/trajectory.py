@@ -1268,15 +1268,15 @@ def deletion_gain(J: np.ndarray, cov_X: np.ndarray, r: np.ndarray, w: np.ndarray
     residual's standard deviation — χ²₂ when the fit is right. One the robust weights
     already discount cannot exceed ``c² = 9`` by its residual alone (``w s = s / (1 + s / c²)
     < c²``): it only can through its leverage, the fit bending to follow it (``A_i`` near
-    ``I``), which the deleted residual sees and the plain one hides."""
-    JS = np.einsum("nai,nij->naj", J, cov_X)
-    P = np.einsum("naj,nbj->nab", JS, J) * (w / (scale * sigma**2))[:, None, None]
-    a, d = 1.0 - P[:, 0, 0], 1.0 - P[:, 1, 1]
-    b = -0.5 * (P[:, 0, 1] + P[:, 1, 0])  # (symmetric up to rounding)
-    x, y = r[:, 0], r[:, 1]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        quad = (d * x * x - 2 * b * x * y + a * y * y) / (a * d - b * b)
-    return w * quad / sigma**2
+    ``I``), which the deleted residual sees and the plain one hides.
+
+    One compiled pass with the einsums' sums where a probe finds their bits
+    (:mod:`pslog.estimation._deletion`, session 44), else numpy's passes."""
+    from ._deletion import deletion_numpy, deletion_terms, usable
+
+    if usable(J, cov_X, r, w):
+        return deletion_terms(J, cov_X, r, w, scale * sigma**2, sigma**2)
+    return deletion_numpy(J, cov_X, r, w, sigma, scale)
 
 
 def _underdetermined_ends(problem: _Problem, breaks: list[np.ndarray],
