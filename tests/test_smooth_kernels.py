@@ -751,12 +751,13 @@ def test_factor_in_place_is_the_copy_and_rebuilds_the_original_on_a_failed_pivot
     assert_array_equal(got, loaded)
 
 
-@pytest.mark.parametrize("n", [2048, 2049, 5000, 30001])
+@pytest.mark.parametrize("n", [2048, 2049, 5000, 30001, 32768, 40001])
 def test_abs_median_of_many_rows_from_a_sample_bracket_is_numpys_median(n):
     """From 4096 values on, the middle order statistics come from the values a sample's
-    order statistics bracket: the same value as np.median with ties (a coarse rounding),
-    heavy tails, non-finite rows and a sample that misses the middle (every sampled value
-    huge: the selection over all then), compiled and its Python original."""
+    order statistics bracket (~1,024 sampled, from 65,536 values on ~16,384): the same
+    value as np.median with ties (a coarse rounding), heavy tails, non-finite rows and a
+    sample that misses the middle (every sampled value huge: the selection over all then),
+    compiled and its Python original."""
     rng = np.random.default_rng(n)
     for trial in range(4):
         r = rng.standard_cauchy((n, 2)) if trial % 2 else np.round(rng.normal(size=(n, 2)), 1)
@@ -764,7 +765,7 @@ def test_abs_median_of_many_rows_from_a_sample_bracket_is_numpys_median(n):
             r[rng.integers(0, n, 5), rng.integers(0, 2, 5)] = np.nan
             r[rng.integers(0, n, 5), rng.integers(0, 2, 5)] = np.inf
         if trial == 3:  # the sampled positions (every step-th value) all far out
-            r.reshape(-1)[:: max(2 * n // 1024, 1)] = 1e9
+            r.reshape(-1)[:: max(2 * n // (16384 if 2 * n >= 65536 else 1024), 1)] = 1e9
         finite = r[np.all(np.isfinite(r), axis=1)]
         for fn in (_kernels.abs_median_finite_rows, _kernels.abs_median_finite_rows.py_func):
             median, rows = fn(r)

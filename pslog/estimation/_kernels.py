@@ -1717,27 +1717,32 @@ def abs_median_finite_rows(r: np.ndarray) -> tuple[float, int]:
     if size == 0:
         return np.nan, 0
     half = size // 2
-    # a large set: the two middle order statistics from the few values between two of an
+    # a large set: the two middle order statistics from the values between two of an
     # evenly spaced sample's order statistics that bracket them (Floyd & Rivest, CACM 18(3),
     # 1975: the same values as a selection over all, in one pass over them and a selection
-    # over a few hundred)
+    # over a fraction). The sample ~1,024 values (from 65,536 values on, ~16,384: the
+    # bracket, 6 standard deviations of the median's rank in the sample either side, then
+    # holds ~5 % of the values where ~1,024's held ~19 %; session 44: 12 -> ~8 ms a call at
+    # 90 minutes)
     if size >= 4096:
-        step = size // 1024
+        big = size >= 65536
+        step = size // (16384 if big else 1024)
+        reach = 384 if big else 96
         sample = np.sort(buf[:size:step])
         ns = len(sample)
         at = (half * ns) // size
-        below_v = sample[max(at - 96, 0)]
-        above_v = sample[min(at + 96, ns - 1)]
+        below_v = sample[max(at - reach, 0)]
+        above_v = sample[min(at + reach, ns - 1)]
         below = 0
         inner = np.empty(size)
         count = 0
         for i in range(size):
+            # (no branch on the value: each is stored at the next free place, which moves
+            # on only for a value inside the bracket; the same values in the same order)
             v = buf[i]
-            if v < below_v:
-                below += 1
-            elif v <= above_v:
-                inner[count] = v
-                count += 1
+            below += v < below_v
+            inner[count] = v
+            count += (v >= below_v) & (v <= above_v)
         lo_rank = half - 1 if size % 2 == 0 else half
         if below <= lo_rank and below + count > half:
             upper = _select(inner, count, half - below)
