@@ -424,6 +424,38 @@ def test_window_normal_solve_in_lanes_is_one_window_at_a_time_bit_for_bit():
             assert_array_equal(a[0], b[k])
 
 
+def test_search_right_is_numpys_searchsorted():
+    """The galloping search (session 44): numpy's ``searchsorted(side="right")`` for knot
+    vectors with repeated knots (clamped ends), times sorted, in runs and shuffled, with
+    ties, -0, ±inf and NaN (counted beyond every knot), outside the knots and none; its
+    Python original the same; and ``bspline.search_right`` the same on every path (the
+    kernel from 64 times on, numpy's below and where a knot is NaN)."""
+    from pslog.estimation.bspline import search_right
+
+    rng = np.random.default_rng(77046)
+    for trial in range(600):
+        n, m = int(rng.integers(0, 40)), int(rng.integers(0, 200))
+        a = np.sort(np.round(rng.normal(size=n), 1))
+        if trial % 3 == 0 and n:
+            a = np.r_[np.full(3, a[0]), a, np.full(3, a[-1])]
+        v = np.round(rng.normal(size=m) * 1.5, 1)
+        if trial % 4 == 1:
+            v = np.sort(v)
+        if trial % 4 == 2:  # runs of increasing times (a prior's node sets)
+            v = np.concatenate([np.sort(part) for part in np.array_split(v, 3)])
+        if m:
+            v[rng.integers(0, m, 3)] = [np.nan, -0.0, np.inf][trial % 3]
+            if trial % 5 == 0:
+                v[rng.integers(0, m)] = -np.inf
+        want = np.searchsorted(a, v, side="right")
+        for fn in (_kernels.search_right, _kernels.search_right.py_func):
+            assert_array_equal(fn(a, v), want)
+        assert_array_equal(search_right(a, v), want)
+    a = np.array([0.0, 1.0, np.nan])
+    v = np.linspace(-1.0, 2.0, 100)
+    assert_array_equal(search_right(a, v), np.searchsorted(a, v, side="right"))
+
+
 def _lens_rig():
     from pslog.camera import Camera, look_at
     from pslog.rig import Rig
