@@ -376,54 +376,6 @@ def test_window_normal_solve_is_the_normal_then_the_solve_bit_for_bit():
     assert np.all(np.isfinite(base.cov[1]))
 
 
-def test_window_normal_solve_in_lanes_is_one_window_at_a_time_bit_for_bit():
-    """The windows factored and solved side by side (``_LANES`` of them, session 44) give,
-    window by window, the bits of window_normal, the diagonal times 1 + 1e-12 and
-    window_solve one window at a time: 37 windows (two full groups of lanes and a part one,
-    whose spare lanes repeat a window), one of the last group's not positive definite
-    (flagged, its x and covariance left 0, the others untouched by its NaNs); each window
-    alone (a group of one lane) the same bits again."""
-    rng = np.random.default_rng(77044)
-    h = 0.011
-    t = np.sort(rng.uniform(0.0, 1.2, 300))
-    J = rng.normal(size=(300, 2, 3)) * 300
-    z = rng.normal(size=(300, 2))
-    w = rng.uniform(0.5, 4.0, 300)
-    from pslog.estimation.trajectory import MotionPrior
-
-    local = _breaks._local(6, h, MotionPrior(), 1)
-    centers = np.linspace(0.1, 1.1, 37)
-    i0 = np.searchsorted(t, centers - 5 * h)
-    i1 = np.searchsorted(t, centers + 5 * h, side="right")
-    W = int(np.max(i1 - i0))
-    index = np.minimum(i0[:, None] + np.arange(W), len(t) - 1)
-    valid = i0[:, None] + np.arange(W) < i1[:, None]
-    base = _breaks._Base(local, t, J, z, w, index, valid, centers, h)
-    inside = base.s_sorted < 1e5
-    wJ = np.where(inside, w[index], 0.0)[..., None, None] * J[index]
-    v = np.ascontiguousarray(np.einsum("bwai,bwa->bwi", wJ, z[index]))
-    M = base.M.copy()
-    M[35] *= -1e6  # window 35 (the third group's fourth lane): not positive definite
-    args = (local.P, local.rhs, base.first, base.N, M, v, inside)
-    assert len(centers) > 2 * _kernels._LANES and len(centers) % _kernels._LANES
-    H, rhs = _kernels.window_normal(*args)
-    n = H.shape[1]
-    H[:, np.arange(n), np.arange(n)] *= 1 + 1e-12
-    lo, hi = 9, 33
-    want = (*_kernels.window_solve(H, rhs, lo, hi), rhs)
-    assert_array_equal(want[2], np.arange(37) != 35)
-    got = _kernels.window_normal_solve(*args, lo, hi)
-    for a, b in zip(got, want, strict=True):
-        assert_array_equal(a, b)
-        assert_array_equal(np.signbit(a), np.signbit(b))
-    assert_array_equal(got[0][35], 0.0)
-    for k in (0, 16, 35, 36):
-        one = _kernels.window_normal_solve(
-            local.P, local.rhs, *(np.ascontiguousarray(a[k:k + 1]) for a in args[2:]), lo, hi)
-        for a, b in zip(one, want, strict=True):
-            assert_array_equal(a[0], b[k])
-
-
 def test_search_right_is_numpys_searchsorted():
     """The galloping search (session 44): numpy's ``searchsorted(side="right")`` for knot
     vectors with repeated knots (clamped ends), times sorted, in runs and shuffled, with

@@ -693,31 +693,16 @@ def _solve_window(Hb: np.ndarray, rb: np.ndarray, lo: int, hi: int, U: np.ndarra
     return True
 
 
-#: windows :func:`window_normal_solve` factors and solves side by side
-_LANES = 16
-
-
 @kernel
 def window_normal_solve(P: np.ndarray, prior_rhs: np.ndarray, first: np.ndarray,
                         N: np.ndarray, M: np.ndarray, v: np.ndarray, inside: np.ndarray,
                         lo: int, hi: int
                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """:func:`window_normal`, the diagonal times ``1 + 1e-12``, then :func:`window_solve`:
-    each window's normal matrix built in a work array that stays in cache (a batch's (B, n,
-    n) matrices, 4 MB for a block of the scan, were written out and read back), only its
-    lower band, the part the factorisation reads; then the windows factored and solved
-    ``_LANES`` at a time, side by side (session 44).
-
-    Each window's entries are the same terms in the same order as :func:`_solve_window`'s
-    (the same bits): a window is a lane, the innermost loop runs over the lanes, so one
-    window's chain of dependent steps (a pivot's square root, then its column's divisions,
-    then the next pivot) overlaps the other lanes' and the products vectorise across them
-    (the factorisation ~3x, the substitutions ~1.4x faster than one window at a time at 90
-    minutes). The build forms each detection's ``M_ik N_c`` once per control point ``c``
-    (it multiplied them again for every block ``(a, c)``: the same products, the same
-    bits). A lane whose pivot is not positive carries on with NaNs that touch no other
-    lane: its outputs are not written (left 0) and its ``ok`` is False, as a window at a
-    time returned at that pivot.
+    """:func:`window_normal`, the diagonal times ``1 + 1e-12``, then :func:`window_solve`,
+    one window at a time: its normal matrix built in a work array that stays in cache (a
+    batch's (B, n, n) matrices, 4 MB for a block of the scan, were written out and read
+    back) and only its lower band, the part the factorisation reads (each entry the same
+    terms in the same order: the same bits).
 
     Returns
     -------
@@ -731,128 +716,37 @@ def window_normal_solve(P: np.ndarray, prior_rhs: np.ndarray, first: np.ndarray,
     cov = np.zeros((B, n, hi - lo))
     ok = np.ones(B, dtype=np.bool_)
     rhs = np.empty((B, n))
-    # (a count known only at run time: the lane loops vectorise, none is unrolled whole)
-    L = min(_LANES, max(B, 1))
+    Hb = np.zeros((n, n))
+    U = np.zeros((n, n))  # U[k, i] = L[i, k]
     ncol = hi - lo + 1
-    Hd = np.zeros((n, n))  # one window's normal matrix (lower band)
-    Q = np.empty((4, 3, 3))
-    Hb = np.zeros((n, bw + 1, L))  # Hb[j, d, l] = H[j + d, j] of lane l's window
-    Ub = np.zeros((n, bw + 1, L))  # Ub[k, d, l] = L[k + d, k] (U[k, k + d])
-    RB = np.zeros((n, L))
-    Y = np.zeros((n, ncol, L))
-    Z = np.zeros((n, ncol, L))
-    T = np.zeros((max(ncol, bw + 1), L))
-    S = np.zeros(L)
-    D = np.zeros(L)
-    okl = np.ones(L, dtype=np.bool_)
-    for b0 in range(0, B, L):
-        nl = min(L, B - b0)
-        for l in range(L):
-            b = b0 + l if l < nl else b0  # (a spare lane repeats the group's first window)
-            for j in range(n):
-                for i in range(j, min(n, j + bw + 1)):
-                    Hd[i, j] = P[i, j]
-            rb = rhs[b]
-            rb[:] = 0.0
-            for w in range(W):
-                if not inside[b, w]:
-                    continue
-                f3 = 3 * first[b, w]
-                for c in range(4):
+    Y = np.zeros((n, ncol))
+    Z = np.zeros((n, ncol))
+    T = np.zeros(max(ncol, bw + 1))
+    for b in range(B):
+        for j in range(n):
+            for i in range(j, min(n, j + bw + 1)):
+                Hb[i, j] = P[i, j]
+        rb = rhs[b]
+        rb[:] = 0.0
+        for w in range(W):
+            if not inside[b, w]:
+                continue
+            f3 = 3 * first[b, w]
+            for a in range(4):
+                na = N[b, w, a]
+                for i in range(3):
+                    rb[f3 + 3 * a + i] += na * v[b, w, i]
+                for c in range(a + 1):  # the blocks on and below the diagonal
                     nc = N[b, w, c]
                     for i in range(3):
-                        for k in range(3):
+                        for k in range(3 if c < a else i + 1):
                             mik = M[b, w, i, k] if i <= k else M[b, w, k, i]
-                            Q[c, i, k] = mik * nc
-                for a in range(4):
-                    na = N[b, w, a]
-                    for i in range(3):
-                        rb[f3 + 3 * a + i] += na * v[b, w, i]
-                    for c in range(a):  # the blocks below the diagonal
-                        for i in range(3):
-                            for k in range(3):
-                                Hd[f3 + 3 * a + i, f3 + 3 * c + k] += na * Q[c, i, k]
-                    for i in range(3):  # the diagonal block's lower triangle
-                        for k in range(i + 1):
-                            Hd[f3 + 3 * a + i, f3 + 3 * a + k] += na * Q[a, i, k]
-            for r in range(n):
-                rb[r] += prior_rhs[r]
-            for r in range(n):
-                Hd[r, r] *= 1 + 1e-12
-            for j in range(n):
-                for d in range(min(bw + 1, n - j)):
-                    Hb[j, d, l] = Hd[j + d, j]
-            for r in range(n):
-                RB[r, l] = rb[r]
-        # _solve_window's factorisation, each lane's entries in its order
-        for l in range(L):
-            okl[l] = True
-        for j in range(n):
-            for l in range(L):
-                S[l] = Hb[j, 0, l]
-            for k in range(max(0, j - bw), j):
-                for l in range(L):
-                    S[l] -= Ub[k, j - k, l] * Ub[k, j - k, l]
-            for l in range(L):
-                okl[l] = okl[l] and S[l] > 0.0
-                D[l] = np.sqrt(S[l])
-                Ub[j, 0, l] = D[l]
-            iend = min(n, j + bw + 1)
-            for i in range(j + 1, iend):
-                for l in range(L):
-                    T[i - j, l] = Hb[j, i - j, l]
-            for k in range(max(0, j + 1 - bw), j):
-                for i in range(j + 1, min(iend, k + bw + 1)):
-                    for l in range(L):
-                        T[i - j, l] -= Ub[k, i - k, l] * Ub[k, j - k, l]
-            for i in range(j + 1, iend):
-                for l in range(L):
-                    Ub[j, i - j, l] = T[i - j, l] / D[l]
-        # forward: the right-hand side (column 0) and the unit columns lo..hi-1
-        for i in range(n):
-            for l in range(L):
-                T[0, l] = RB[i, l]
-            for col in range(1, ncol):
-                e = 1.0 if i == lo + col - 1 else 0.0
-                for l in range(L):
-                    T[col, l] = e
-            for k in range(max(0, i - bw), i):
-                for col in range(min(ncol, max(1, k - lo + 2))):
-                    for l in range(L):
-                        T[col, l] -= Ub[k, i - k, l] * Y[k, col, l]
-            for col in range(ncol):
-                if col == 0 or i >= lo + col - 1:
-                    for l in range(L):
-                        Y[i, col, l] = T[col, l] / Ub[i, 0, l]
-                else:
-                    for l in range(L):
-                        Y[i, col, l] = 0.0
-        # back: the minimum in full, a unit column down to row lo only
-        for i in range(n - 1, -1, -1):
-            nc = ncol if i >= lo else 1
-            for col in range(nc):
-                for l in range(L):
-                    T[col, l] = Y[i, col, l]
-            for k in range(i + 1, min(n, i + bw + 1)):
-                for col in range(nc):
-                    for l in range(L):
-                        T[col, l] -= Ub[i, k - i, l] * Z[k, col, l]
-            for col in range(nc):
-                for l in range(L):
-                    Z[i, col, l] = T[col, l] / Ub[i, 0, l]
-        for l in range(nl):
-            if not okl[l]:
-                ok[b0 + l] = False
-        for i in range(n):
-            for l in range(nl):
-                if okl[l]:
-                    x[b0 + l, i] = Z[i, 0, l]
-        for i in range(lo, n):
-            for l in range(nl):
-                if okl[l]:
-                    cb = cov[b0 + l, i]
-                    for col in range(1, ncol):
-                        cb[col - 1] = Z[i, col, l]
+                            Hb[f3 + 3 * a + i, f3 + 3 * c + k] += na * (mik * nc)
+        for r in range(n):
+            rb[r] += prior_rhs[r]
+        for r in range(n):
+            Hb[r, r] *= 1 + 1e-12
+        ok[b] = _solve_window(Hb, rb, lo, hi, U, Y, Z, T, x[b], cov[b])
     return x, cov, ok, rhs
 
 
