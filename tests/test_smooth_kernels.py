@@ -376,6 +376,38 @@ def test_window_normal_solve_is_the_normal_then_the_solve_bit_for_bit():
     assert np.all(np.isfinite(base.cov[1]))
 
 
+def test_search_right_is_numpys_searchsorted():
+    """The galloping search (session 44): numpy's ``searchsorted(side="right")`` for knot
+    vectors with repeated knots (clamped ends), times sorted, in runs and shuffled, with
+    ties, -0, ±inf and NaN (counted beyond every knot), outside the knots and none; its
+    Python original the same; and ``bspline.search_right`` the same on every path (the
+    kernel from 64 times on, numpy's below and where a knot is NaN)."""
+    from pslog.estimation.bspline import search_right
+
+    rng = np.random.default_rng(77046)
+    for trial in range(600):
+        n, m = int(rng.integers(0, 40)), int(rng.integers(0, 200))
+        a = np.sort(np.round(rng.normal(size=n), 1))
+        if trial % 3 == 0 and n:
+            a = np.r_[np.full(3, a[0]), a, np.full(3, a[-1])]
+        v = np.round(rng.normal(size=m) * 1.5, 1)
+        if trial % 4 == 1:
+            v = np.sort(v)
+        if trial % 4 == 2:  # runs of increasing times (a prior's node sets)
+            v = np.concatenate([np.sort(part) for part in np.array_split(v, 3)])
+        if m:
+            v[rng.integers(0, m, 3)] = [np.nan, -0.0, np.inf][trial % 3]
+            if trial % 5 == 0:
+                v[rng.integers(0, m)] = -np.inf
+        want = np.searchsorted(a, v, side="right")
+        for fn in (_kernels.search_right, _kernels.search_right.py_func):
+            assert_array_equal(fn(a, v), want)
+        assert_array_equal(search_right(a, v), want)
+    a = np.array([0.0, 1.0, np.nan])
+    v = np.linspace(-1.0, 2.0, 100)
+    assert_array_equal(search_right(a, v), np.searchsorted(a, v, side="right"))
+
+
 def _lens_rig():
     from pslog.camera import Camera, look_at
     from pslog.rig import Rig
@@ -703,12 +735,13 @@ def test_factor_in_place_is_the_copy_and_rebuilds_the_original_on_a_failed_pivot
     assert_array_equal(got, loaded)
 
 
-@pytest.mark.parametrize("n", [2048, 2049, 5000, 30001])
+@pytest.mark.parametrize("n", [2048, 2049, 5000, 30001, 32768, 40001])
 def test_abs_median_of_many_rows_from_a_sample_bracket_is_numpys_median(n):
     """From 4096 values on, the middle order statistics come from the values a sample's
-    order statistics bracket: the same value as np.median with ties (a coarse rounding),
-    heavy tails, non-finite rows and a sample that misses the middle (every sampled value
-    huge: the selection over all then), compiled and its Python original."""
+    order statistics bracket (~1,024 sampled, from 65,536 values on ~16,384): the same
+    value as np.median with ties (a coarse rounding), heavy tails, non-finite rows and a
+    sample that misses the middle (every sampled value huge: the selection over all then),
+    compiled and its Python original."""
     rng = np.random.default_rng(n)
     for trial in range(4):
         r = rng.standard_cauchy((n, 2)) if trial % 2 else np.round(rng.normal(size=(n, 2)), 1)
@@ -716,7 +749,7 @@ def test_abs_median_of_many_rows_from_a_sample_bracket_is_numpys_median(n):
             r[rng.integers(0, n, 5), rng.integers(0, 2, 5)] = np.nan
             r[rng.integers(0, n, 5), rng.integers(0, 2, 5)] = np.inf
         if trial == 3:  # the sampled positions (every step-th value) all far out
-            r.reshape(-1)[:: max(2 * n // 1024, 1)] = 1e9
+            r.reshape(-1)[:: max(2 * n // (16384 if 2 * n >= 65536 else 1024), 1)] = 1e9
         finite = r[np.all(np.isfinite(r), axis=1)]
         for fn in (_kernels.abs_median_finite_rows, _kernels.abs_median_finite_rows.py_func):
             median, rows = fn(r)

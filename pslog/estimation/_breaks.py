@@ -456,8 +456,8 @@ def _prior_terms_probe(kernel) -> bool:
 
 
 def scan(t: np.ndarray, J: np.ndarray, z: np.ndarray, w: np.ndarray, centers: np.ndarray,
-         bounds: np.ndarray, limits: np.ndarray, spacing: float, half_width: float, prior
-         ) -> tuple[np.ndarray, np.ndarray]:
+         bounds: np.ndarray, limits: np.ndarray, spacing: float, half_width: float, prior,
+         terms: tuple | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Best break instant in ``bounds`` and its cost gain, for every candidate at once.
 
     Parameters
@@ -467,19 +467,22 @@ def scan(t: np.ndarray, J: np.ndarray, z: np.ndarray, w: np.ndarray, centers: np
         ``limits`` (C, 2) (neighbouring breaks, whose other side is not modelled here, and the
         piece's ends)
     bounds : (C, 2) s, the interval searched for ``τ``
+    terms : :func:`detection_terms` of every detection of ``J``, ``w`` (made once by a
+        caller that scans one linearisation several times), or None: made here for the
+        detections the windows hold
 
     Returns
     -------
     tau : (C,) s; gain : (C,) cost without the break minus cost with it (σ² units)
     """
     tau, gain, _ = _scan(t, J, z, w, centers, bounds, limits, spacing, half_width, prior,
-                         False)
+                         False, terms=terms)
     return tau, gain
 
 
 def scan_near(t: np.ndarray, J: np.ndarray, z: np.ndarray, w: np.ndarray,
               centers: np.ndarray, bounds: np.ndarray, limits: np.ndarray, spacing: float,
-              half_width: float, prior, narrow: bool = False
+              half_width: float, prior, narrow: bool = False, terms: tuple | None = None
               ) -> tuple[np.ndarray, np.ndarray]:
     """:func:`scan` of breaks already located near ``centers``, ``bounds`` within ``h/4`` of
     them (a refinement): every trial instant is then at least ``h/4`` from the knots
@@ -501,13 +504,14 @@ def scan_near(t: np.ndarray, J: np.ndarray, z: np.ndarray, w: np.ndarray,
         raise ValueError("scan_near: bounds further than h/4 from their centres")
     stages = (3, _NARROW_POLISH) if narrow else (_NEAR_GRID, _POLISH)
     tau, _, edge = _scan(t, J, z, w, centers, bounds, limits, spacing, half_width, prior,
-                         True, stages)
+                         True, stages, terms)
     return tau, edge
 
 
 def gain_at(t: np.ndarray, J: np.ndarray, z: np.ndarray, w: np.ndarray,
             centers: np.ndarray, bounds: np.ndarray, limits: np.ndarray, spacing: float,
-            half_width: float, prior) -> tuple[np.ndarray, np.ndarray]:
+            half_width: float, prior, terms: tuple | None = None
+            ) -> tuple[np.ndarray, np.ndarray]:
     """The gain of a break at each of ``centers`` itself (one trial on :func:`scan_near`'s
     base, no search; ``bounds`` must be ``[centre, centre]``): what a break already located
     there saves on the problem linearised at a fit (``smooth``'s confirmation of its
@@ -522,16 +526,16 @@ def gain_at(t: np.ndarray, J: np.ndarray, z: np.ndarray, w: np.ndarray,
     if np.any(bounds != centers[:, None]):
         raise ValueError("gain_at: bounds must be [centre, centre]")
     tau, gain, _ = _scan(t, J, z, w, centers, bounds, limits, spacing, half_width, prior,
-                         True, (1, 0))
+                         True, (1, 0), terms)
     return tau, gain
 
 
 def _scan(t: np.ndarray, J: np.ndarray, z: np.ndarray, w: np.ndarray, centers: np.ndarray,
           bounds: np.ndarray, limits: np.ndarray, spacing: float, half_width: float, prior,
-          near: bool, stages: tuple[int, int] = (_GRID, _POLISH)
+          near: bool, stages: tuple[int, int] = (_GRID, _POLISH), terms: tuple | None = None
           ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:func:`scan` (``near`` False) and :func:`scan_near` (True): tau, gain, edge;
-    ``stages``: the grid's trials and the polishing stages."""
+    ``stages``: the grid's trials and the polishing stages; ``terms``: :func:`scan`'s."""
     C = len(centers)
     if C == 0:
         return np.zeros(0), np.zeros(0), np.zeros(0, np.int64)
@@ -550,7 +554,8 @@ def _scan(t: np.ndarray, J: np.ndarray, z: np.ndarray, w: np.ndarray, centers: n
     rel = (bounds - centers[:, None]) / spacing
     spans = (int(np.floor(np.min(rel))) - 1, int(np.floor(np.max(rel))))
 
-    terms = detection_terms(J, w, i0, i1)
+    if terms is None:
+        terms = detection_terms(J, w, i0, i1)
 
     def block(c0: int, c1: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The scan of candidates c0..c1-1 (each candidate's result depends on its own

@@ -46,8 +46,23 @@ def n_control(knots: np.ndarray) -> int:
 def span_index(knots: np.ndarray, t: np.ndarray) -> np.ndarray:
     """Index ``j`` of the non-empty span ``[τ_j, τ_{j+1})`` holding each ``t`` (n,); the last
     span is closed on the right. Points outside the knot range take the nearest end span."""
-    j = np.searchsorted(knots, t, side="right") - 1
+    j = search_right(knots, t) - 1
     return np.clip(j, DEGREE, n_control(knots) - 1)
+
+
+def search_right(knots: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """``np.searchsorted(knots, t, side="right")``: for many times a compiled galloping
+    search from the previous answer (:func:`pslog.estimation._kernels.search_right`, the
+    same integers; a fit's times come in increasing runs: ~4 against ~15 ms for 486,000
+    times in 162,000 knots, session 44), numpy's binary search otherwise."""
+    t = np.asarray(t)
+    knots = np.asarray(knots)
+    if (len(t) < 64 or t.dtype != np.float64 or knots.dtype != np.float64 or t.ndim != 1
+            or knots.ndim != 1 or np.isnan(knots).any()):
+        return np.searchsorted(knots, t, side="right")
+    from ._kernels import search_right as kernel
+
+    return kernel(np.ascontiguousarray(knots), np.ascontiguousarray(t))
 
 
 def basis(knots: np.ndarray, t: np.ndarray, n_derivatives: int = 2
@@ -127,7 +142,7 @@ def basis_pieces(knots: list[np.ndarray], piece: np.ndarray, t: np.ndarray,
     for p in np.flatnonzero(bounds[1:] > bounds[:-1]):
         rows = slice(bounds[p], bounds[p + 1]) if order is None else order[
             bounds[p]:bounds[p + 1]]
-        j[rows] = np.searchsorted(knots[p], t[rows], side="right") - 1 + start[p]
+        j[rows] = search_right(knots[p], t[rows]) - 1 + start[p]
     j = np.clip(j, lo, hi)
     if only is not None:
         from ._kernels import basis_derivative_in_span

@@ -448,6 +448,15 @@ class _Problem:
     def positions(self, control: np.ndarray) -> np.ndarray:
         return self.points.positions(control)
 
+    def positions_known(self, control: np.ndarray) -> np.ndarray:
+        """:meth:`positions` of ``control``, the last :meth:`remember`-ed projection's array
+        when ``control`` is that array (the same values: the stages after a run read the
+        positions the run ended at; ~5 ms a call at 90 minutes). Read only: the array may be
+        the remembered one."""
+        if self._last is not None and self._last[0] is control:
+            return self._last[1]
+        return self.positions(control)
+
     def project(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Residuals (n, 2) pixels and ``∂uv/∂X`` (n, 2, 3) of the fitted observations.
 
@@ -985,7 +994,7 @@ def _fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions,
             break
         breaks = [np.sort(np.r_[b, f]) for b, f in zip(breaks, found, strict=True)]
         knots = piece_knots(breaks)
-        X_old = problem.positions(control)
+        X_old = problem.positions_known(control)
         problem.set_knots(knots, loose)
         # the next Gauss-Newton step, taken on the new knots (:func:`_refit_linearised`)
         control = _refit_linearised(problem, X_old, r, J, w, sigma)
@@ -997,12 +1006,18 @@ def _fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions,
         control, sigma, min(options.iterations, _REFINE_ITERATIONS) if refine
         else options.iterations)
     if refine:  # each break's time again, at the fit under the real prior
-        breaks = _refine_breaks(problem, control, sigma, r, w, J, spacing, breaks, options)
+        # every fitted detection's w J and w JᵀJ at this fit, formed once for the refine's
+        # and the confirmation's scans (each formed those of its windows' detections: ~8
+        # times the same at 90 minutes; session 44)
+        terms = _scan_terms(J, w, sigma)
+        breaks = _refine_breaks(problem, control, sigma, r, w, J, spacing, breaks, options,
+                                terms=terms)
         # each break kept only where it pays its way under the real prior too
         breaks = _confirmed_breaks(problem, control, sigma, r, w, J, spacing, breaks,
-                                   options)
+                                   options, terms=terms)
+        del terms
         knots = piece_knots(breaks)
-        X_old = problem.positions(control)
+        X_old = problem.positions_known(control)
         problem.set_knots(knots, options.prior)
         control = _refit_linearised(problem, X_old, r, J, w, sigma)
         # the dof-corrected run below continues these iterations (the refit above the first
@@ -1061,7 +1076,7 @@ def _fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions,
             if sum(len(b) for b in kept) < sum(len(b) for b in breaks):
                 breaks = kept
                 knots = piece_knots(breaks)
-                X_old = problem.positions(control)
+                X_old = problem.positions_known(control)
                 problem.set_knots(knots, options.prior)
                 control = _refit_linearised(problem, X_old, r, J, w, sigma)
                 _, r, J = problem.project_control(control)
@@ -1268,15 +1283,15 @@ def deletion_gain(J: np.ndarray, cov_X: np.ndarray, r: np.ndarray, w: np.ndarray
     residual's standard deviation — χ²₂ when the fit is right. One the robust weights
     already discount cannot exceed ``c² = 9`` by its residual alone (``w s = s / (1 + s / c²)
     < c²``): it only can through its leverage, the fit bending to follow it (``A_i`` near
-    ``I``), which the deleted residual sees and the plain one hides."""
-    JS = np.einsum("nai,nij->naj", J, cov_X)
-    P = np.einsum("naj,nbj->nab", JS, J) * (w / (scale * sigma**2))[:, None, None]
-    a, d = 1.0 - P[:, 0, 0], 1.0 - P[:, 1, 1]
-    b = -0.5 * (P[:, 0, 1] + P[:, 1, 0])  # (symmetric up to rounding)
-    x, y = r[:, 0], r[:, 1]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        quad = (d * x * x - 2 * b * x * y + a * y * y) / (a * d - b * b)
-    return w * quad / sigma**2
+    ``I``), which the deleted residual sees and the plain one hides.
+
+    One compiled pass with the einsums' sums where a probe finds their bits
+    (:mod:`pslog.estimation._deletion`, session 44), else numpy's passes."""
+    from ._deletion import deletion_numpy, deletion_terms, usable
+
+    if usable(J, cov_X, r, w):
+        return deletion_terms(J, cov_X, r, w, scale * sigma**2, sigma**2)
+    return deletion_numpy(J, cov_X, r, w, sigma, scale)
 
 
 def _underdetermined_ends(problem: _Problem, breaks: list[np.ndarray],
@@ -1412,7 +1427,7 @@ def _information_factored(problem: _Problem, control: np.ndarray, sigma: float,
                           ) -> tuple[np.ndarray, float, float, np.ndarray]:
     """:func:`_information`, and the banded Cholesky factor ``U`` of ``H`` (``H = UᵀU``, for
     :func:`bias_sensitivity`)."""
-    X = problem.positions(control)
+    X = problem.positions_known(control)
     s = _scaled_norms(r, sigma)
     w = 1 / (1 + s / _CAUCHY**2)
     ab, _ = problem.linearised_normal(J, X, r, w / sigma**2)
@@ -1553,7 +1568,7 @@ def _find_breaks(problem: _Problem, control: np.ndarray, sigma: float, r: np.nda
     the same local fit as in that round, which rejected it): the peaks of ``‖p'' - g‖`` above
     ``break_accel``, each kept if a break near it gains more than ``break_threshold``."""
     g = np.asarray(options.prior.gravity)
-    X = problem.positions(control)
+    X = problem.positions_known(control)
     target = _linear_target(J, X, r)  # the linearised measurements
     weight = w / sigma**2
     t_obs = problem.t[problem.rows]
@@ -1672,9 +1687,17 @@ def _greedy_breaks(tau: np.ndarray, gain: np.ndarray, free: np.ndarray, threshol
     return np.sort(np.r_[tau[isolated], np.array(found)])
 
 
+def _scan_terms(J: np.ndarray, w: np.ndarray, sigma: float) -> tuple:
+    """:func:`_breaks.detection_terms` of every fitted detection (``J`` (n, 2, 3), weights
+    ``w`` (n,) at ``σ``, the scans' ``w / σ²``): the ``terms`` of :func:`_scan_pieces`."""
+    empty = np.zeros(0, np.int64)
+    return _breaks.detection_terms(J, w / sigma**2, empty, empty)
+
+
 def _scan_pieces(jobs: list, t_obs: np.ndarray, J: np.ndarray, target: np.ndarray,
                  weight: np.ndarray, spacing: float, options: SmoothOptions,
-                 near: bool = False, narrow: bool = False, gains: bool = False) -> list:
+                 near: bool = False, narrow: bool = False, gains: bool = False,
+                 terms: tuple | None = None) -> list:
     """:func:`_breaks.scan` (``near``: :func:`_breaks.scan_near`, with ``narrow`` its
     narrow form) of every piece's candidates in one batched call.
 
@@ -1682,7 +1705,9 @@ def _scan_pieces(jobs: list, t_obs: np.ndarray, J: np.ndarray, target: np.ndarra
     each window is also cut at its piece's first and last detection, so the pieces' rows
     laid end to end (in time order: the pieces follow each other in time) serve as one.
     ``gains``: :func:`_breaks.gain_at` (each job's bounds ``[τ, τ]``), the gain of a break at
-    each centre. Returns a (tau, gain) per job (``near``: (tau, edge))."""
+    each centre. ``terms``: :func:`_breaks.detection_terms` of every fitted detection's
+    ``J``, ``weight`` (the refine's and the confirmation's scans of one linearisation
+    share them), or None. Returns a (tau, gain) per job (``near``: (tau, edge))."""
     if not jobs:
         return []
     search = (_breaks.gain_at if gains else
@@ -1702,10 +1727,14 @@ def _scan_pieces(jobs: list, t_obs: np.ndarray, J: np.ndarray, target: np.ndarra
     limits = np.concatenate([np.stack([np.maximum(lim[:, 0], t_obs[here[0]]),
                                        np.minimum(lim[:, 1], t_obs[here[-1]])], axis=1)
                              for _, here, _, _, lim in jobs])
+    # the shared terms of these rows (a slice of them: a row's terms are the same whichever
+    # rows are formed with it)
+    held = (terms[0][rows], terms[1], terms[2]) if (
+        terms is not None and isinstance(rows, slice)) else None
     tau, gain = search(t, J[rows], target[rows], weight[rows],
                        np.concatenate([c for _, _, c, _, _ in jobs]),
                        np.concatenate([b for _, _, _, b, _ in jobs]), limits, spacing,
-                       _WINDOW_SPANS * spacing, options.prior)
+                       _WINDOW_SPANS * spacing, options.prior, terms=held)
     cuts = np.cumsum([len(c) for _, _, c, _, _ in jobs])[:-1]
     return list(zip(np.split(tau, cuts), np.split(gain, cuts), strict=True))
 
@@ -1748,7 +1777,7 @@ def _neighbours(centers: np.ndarray, known: np.ndarray) -> np.ndarray:
 
 def _refine_breaks(problem: _Problem, control: np.ndarray, sigma: float, r: np.ndarray,
                    w: np.ndarray, J: np.ndarray, spacing: float, breaks: list[np.ndarray],
-                   options: SmoothOptions) -> list[np.ndarray]:
+                   options: SmoothOptions, terms: tuple | None = None) -> list[np.ndarray]:
     """Each break's time re-estimated on the problem linearised at the final fit, the
     neighbouring breaks held (the first estimate was linearised at the loose fit): within
     ``_REFINE_STAGES[0]`` spacings of it (:func:`_breaks.scan_near` ``narrow``: one base,
@@ -1768,7 +1797,7 @@ def _refine_breaks(problem: _Problem, control: np.ndarray, sigma: float, r: np.n
     90-minute match's 10,224 for its one merge: the refine 1.01 → 0.63 CPU s; docs/methods.md,
     "`smooth` at 90 minutes (session 29)")."""
     out, dropped = _refine_pass(problem, control, sigma, r, w, J, spacing, breaks, options,
-                                None)
+                                None, terms)
     while any(len(d) for d in dropped):
         only = []
         for known, gone, old in zip(out, dropped, breaks, strict=True):
@@ -1786,7 +1815,7 @@ def _refine_breaks(problem: _Problem, control: np.ndarray, sigma: float, r: np.n
             only.append(mask)
         breaks = out
         out, dropped = _refine_pass(problem, control, sigma, r, w, J, spacing, out, options,
-                                    only)
+                                    only, terms)
     return out
 
 
@@ -1811,12 +1840,12 @@ def _pieces_with_breaks(problem: _Problem, t_obs: np.ndarray, breaks: list[np.nd
 def _refine_pass(problem: _Problem, control: np.ndarray, sigma: float, r: np.ndarray,
                  w: np.ndarray, J: np.ndarray, spacing: float, breaks: list[np.ndarray],
                  options: SmoothOptions, only: list[np.ndarray] | None,
-                 ) -> tuple[list[np.ndarray], list[np.ndarray]]:
+                 terms: tuple | None = None) -> tuple[list[np.ndarray], list[np.ndarray]]:
     """One pass of :func:`_refine_breaks` over the breaks ``only`` marks (per piece, a
     mask over its breaks; None: all), the others kept where they are: ``(breaks, dropped)``
     per piece, the breaks sorted, at most one per knot spacing, and the instants that
     merged into a neighbour (dropped)."""
-    X = problem.positions(control)
+    X = problem.positions_known(control)
     target = _linear_target(J, X, r)
     weight = w / sigma**2
     t_obs = problem.t[problem.rows]
@@ -1858,7 +1887,8 @@ def _refine_pass(problem: _Problem, control: np.ndarray, sigma: float, r: np.nda
         if not jobs:
             break
         results = _scan_pieces(jobs, t_obs, J, target, weight, spacing, options,
-                               near=stage is not None, narrow=stage == _REFINE_STAGES[0])
+                               near=stage is not None, narrow=stage == _REFINE_STAGES[0],
+                               terms=terms)
         todo = [np.zeros(0, np.int64) for _ in wide]
         for (k, rows), job, (tau, edge) in zip(at, jobs, results, strict=True):
             taus[k][rows] = tau
@@ -1879,7 +1909,7 @@ def _refine_pass(problem: _Problem, control: np.ndarray, sigma: float, r: np.nda
         refined.append((p, here, tau))
         moved.append(np.abs(tau - known))
     # (the gains of the breaks within a spacing of another: which of them stays)
-    gains = _crowded_gains(refined, t_obs, J, target, weight, spacing, options)
+    gains = _crowded_gains(refined, t_obs, J, target, weight, spacing, options, terms)
     for (p, _, tau), how_far, gain in zip(refined, moved, gains, strict=True):
         # a break the moved detections no longer allow (too near a piece's end) is dropped
         out[p] = _one_per_span(tau, how_far, spacing, gain)
@@ -1889,8 +1919,8 @@ def _refine_pass(problem: _Problem, control: np.ndarray, sigma: float, r: np.nda
 
 
 def _crowded_gains(refined: list, t_obs: np.ndarray, J: np.ndarray, target: np.ndarray,
-                   weight: np.ndarray, spacing: float, options: SmoothOptions
-                   ) -> list[np.ndarray]:
+                   weight: np.ndarray, spacing: float, options: SmoothOptions,
+                   terms: tuple | None = None) -> list[np.ndarray]:
     """Per piece ``(piece, rows in time order, refined breaks (b,))`` of ``refined``: the
     gain (b,) (σ² units, :func:`_breaks.gain_at`) of each break that lies within a knot
     spacing of a neighbour, on the problem linearised at the fit the refine ran at, its
@@ -1920,7 +1950,8 @@ def _crowded_gains(refined: list, t_obs: np.ndarray, J: np.ndarray, target: np.n
         jobs.append((p, here, s[m], np.stack([s[m], s[m]], axis=1),
                      np.stack([lo[m], hi[m]], axis=1)))
         where.append((k, order[m]))
-    results = _scan_pieces(jobs, t_obs, J, target, weight, spacing, options, gains=True)
+    results = _scan_pieces(jobs, t_obs, J, target, weight, spacing, options, gains=True,
+                           terms=terms)
     for (k, idx), (_, gain) in zip(where, results, strict=True):
         out[k][idx] = gain
     return out
@@ -1928,7 +1959,8 @@ def _crowded_gains(refined: list, t_obs: np.ndarray, J: np.ndarray, target: np.n
 
 def _confirmed_breaks(problem: _Problem, control: np.ndarray, sigma: float, r: np.ndarray,
                       w: np.ndarray, J: np.ndarray, spacing: float, breaks: list[np.ndarray],
-                      options: SmoothOptions) -> list[np.ndarray]:
+                      options: SmoothOptions, terms: tuple | None = None
+                      ) -> list[np.ndarray]:
     """The refined ``breaks`` that gain more than ``break_threshold`` on the problem
     linearised at the fit under the real prior (``control``, ``sigma``: the fit the refine
     ran at), each at its refined instant (the refine's optimum on the same linearisation),
@@ -1943,7 +1975,7 @@ def _confirmed_breaks(problem: _Problem, control: np.ndarray, sigma: float, r: n
     sessions). The break is a model choice of the trajectory output, which is fitted under
     the real prior: it must lower that fit's cost by the same 25 σ² (docs/methods.md,
     "`lab3`'s `straight` at 1.21")."""
-    X = problem.positions(control)
+    X = problem.positions_known(control)
     target = _linear_target(J, X, r)
     t_obs = problem.t[problem.rows]
     jobs, ok_of = [], {}
@@ -1956,7 +1988,7 @@ def _confirmed_breaks(problem: _Problem, control: np.ndarray, sigma: float, r: n
                      limits[ok]))
         ok_of[p] = ok
     results = _scan_pieces(jobs, t_obs, J, target, w / sigma**2, spacing, options,
-                           gains=True)
+                           gains=True, terms=terms)
     out = [np.asarray(b, dtype=np.float64) for b in breaks]
     reach = _WINDOW_SPANS * spacing
     for (p, here, known, _, limits), (_, gain) in zip(jobs, results, strict=True):
