@@ -19,7 +19,7 @@ import warnings
 import numpy as np
 import pytest
 from _cli import pslog, pslog_ok
-from test_export_paths_and_c3d import _c3d_frames, _drifting_rig
+from test_export_paths_and_c3d import _c3d_frames, _drifting_rig, late_throw_c3d
 
 from pslog.log import read_session
 from pslog.timing import camera_parameters, true_times_ns
@@ -162,29 +162,8 @@ def test_c3d_past_frame_65535_read_back_by_its_own_count(tmp_path):
     writer took its start frame back through the same join: the file said 90,003, one frame
     (11 ms) early to btk and Mokka; now 90,004; and the frame c3d's reader reads beyond holds
     an invalid point, not the padding's valid one at the origin."""
-    from decimal import Decimal
-
-    from pslog.interchange.track_formats import c3d_grid
-
-    burst, rig = tmp_path / "burst.mcap", tmp_path / "rig.toml"
-    pslog_ok("simulate", "--rig", "paper3", "--timing", "typeA", "--motion", "throw",
-             "--duration", "1", "--seed", "77003", "-o", burst)
-    rig.write_text(pslog_ok("rig", "show", burst))
-    pslog_ok("export", burst, "--detections", tmp_path / "d.csv")
-    lines = (tmp_path / "d.csv").read_text().splitlines()
-    late = [lines[0]]
-    for line in lines[1:]:  # the same throw 1000 s on
-        cells = line.split(",")
-        cells[1] = str(Decimal(cells[1]) + 1000)
-        cells[4] = str(int(cells[4]) + 1000 * 30)
-        late.append(",".join(cells))
-    (tmp_path / "late.csv").write_text("\n".join(late) + "\n")
-    session, fused, path = tmp_path / "late.mcap", tmp_path / "f.mcap", tmp_path / "t.c3d"
-    pslog_ok("import", "--rig", rig, "--detections", tmp_path / "late.csv", "-o", session)
-    pslog_ok("fuse", session, "--method", "typeA", "-o", fused)
-    pslog_ok("export", fused, "--c3d", path)
-    tracks = read_session(fused)
-    rate, first, n = c3d_grid(tracks)
+    # the same throw 1000 s on, alone
+    _out, path, tracks, (rate, first, n) = late_throw_c3d(tmp_path, 77003, 1000, keep=False)
     start = round(first * rate / 1e9) + 1
     assert rate == 90.0 and start > 65535 and n < 200
     c3d = pytest.importorskip("c3d")

@@ -167,29 +167,10 @@ def test_c3d_beyond_65535_frames_counts_them_in_its_parameters(tmp_path):
     TRIAL:ACTUAL_START_FIELD / ACTUAL_END_FIELD (two 16-bit words each, low first), POINT:
     FRAMES 65535. Read back from the bytes themselves, and every frame with c3d's reader."""
     import struct
-    from decimal import Decimal
 
-    from pslog.interchange.track_formats import c3d_grid
 
-    burst, rig = tmp_path / "burst.mcap", tmp_path / "rig.toml"
-    pslog_ok("simulate", "--rig", "paper3", "--timing", "typeA", "--motion", "throw",
-             "--duration", "1", "--seed", "75071", "-o", burst)
-    rig.write_text(pslog_ok("rig", "show", burst))
-    pslog_ok("export", burst, "--detections", tmp_path / "d.csv")
-    lines = (tmp_path / "d.csv").read_text().splitlines()
-    late = []
-    for line in lines[1:]:  # the same throw 5399 s later: a session of 90 minutes
-        cells = line.split(",")
-        cells[1] = str(Decimal(cells[1]) + 5399)
-        cells[4] = str(int(cells[4]) + 5399 * 30)
-        late.append(",".join(cells))
-    (tmp_path / "long.csv").write_text("\n".join(lines + late) + "\n")
-    session, fused, path = tmp_path / "long.mcap", tmp_path / "f.mcap", tmp_path / "t.c3d"
-    pslog_ok("import", "--rig", rig, "--detections", tmp_path / "long.csv", "-o", session)
-    pslog_ok("fuse", session, "--method", "typeA", "-o", fused)
-    out = pslog_ok("export", fused, "--c3d", path)
-    tracks = read_session(fused)
-    rate, first, n = c3d_grid(tracks)
+    # the same throw 5399 s later, after the first: a session of 90 minutes
+    out, path, tracks, (rate, first, n) = late_throw_c3d(tmp_path, 75071, 5399, keep=True)
     assert rate == 90.0 and n > 480_000 and f"wrote {path}: {n} frames at 90 Hz" in out
     start = round(first * rate / 1e9) + 1
     data = path.read_bytes()
@@ -215,3 +196,33 @@ def test_c3d_beyond_65535_frames_counts_them_in_its_parameters(tmp_path):
     assert at[-1] == n - 1  # the last point on the last frame, 90 minutes on
     assert np.allclose(frames[at, 0, :3], track.position_world * 1000.0, atol=1e-3)
     assert np.count_nonzero(frames[:, 0, 3] != -1) == len(track)
+
+
+def late_throw_c3d(tmp_path, seed: int, shift_s: int, keep: bool):
+    """A one-second throw (paper3, type A timing, ``seed``) moved ``shift_s`` seconds on
+    (``keep``: after the original detections, one session that long), imported, fused by
+    type A and exported to C3D: (the export's output, the C3D path, the fused tracks,
+    :func:`pslog.interchange.track_formats.c3d_grid`'s ``(rate, first, n)``)."""
+    from decimal import Decimal
+
+    from pslog.interchange.track_formats import c3d_grid
+
+    burst, rig = tmp_path / "burst.mcap", tmp_path / "rig.toml"
+    pslog_ok("simulate", "--rig", "paper3", "--timing", "typeA", "--motion", "throw",
+             "--duration", "1", "--seed", str(seed), "-o", burst)
+    rig.write_text(pslog_ok("rig", "show", burst))
+    pslog_ok("export", burst, "--detections", tmp_path / "d.csv")
+    lines = (tmp_path / "d.csv").read_text().splitlines()
+    late = []
+    for line in lines[1:]:
+        cells = line.split(",")
+        cells[1] = str(Decimal(cells[1]) + shift_s)
+        cells[4] = str(int(cells[4]) + shift_s * 30)
+        late.append(",".join(cells))
+    (tmp_path / "late.csv").write_text("\n".join((lines if keep else lines[:1]) + late) + "\n")
+    session, fused, path = tmp_path / "late.mcap", tmp_path / "f.mcap", tmp_path / "t.c3d"
+    pslog_ok("import", "--rig", rig, "--detections", tmp_path / "late.csv", "-o", session)
+    pslog_ok("fuse", session, "--method", "typeA", "-o", fused)
+    out = pslog_ok("export", fused, "--c3d", path)
+    tracks = read_session(fused)
+    return out, path, tracks, c3d_grid(tracks)
