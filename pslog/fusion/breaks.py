@@ -62,15 +62,20 @@ class SessionFit:
     it. So a ``pslog fuse`` of both fits once, and type A's breaks are the same whether
     ``smooth`` is fused beside it or not (its breaks do not depend on the clocks' consider
     covariance that only ``smooth``'s own track needs). ``options``: FusionOptions with
-    ``max_gap_s`` set, ``smooth``'s."""
+    ``max_gap_s`` set, ``smooth``'s. ``users``: the methods that use it (``"smooth"``,
+    ``"typeA"``), each releasing its use once (:meth:`release`; type A as soon as it has
+    the breaks, :meth:`take_breaks`: its backward pass does not hold the fit); after the
+    last, the fit and its input are dropped and ``on_drop`` is called."""
 
     def __init__(self, make_input: Callable[[], Prepared], rig: Rig, options,
-                 uses: int = 1) -> None:
+                 users: tuple[str, ...] = ("typeA",),
+                 on_drop: Callable[[], object] | None = None) -> None:
         self._make_input: Callable[[], Prepared] | None = make_input
         self._rig, self._options = rig, options
         self._lock = threading.Lock()
         self._value: tuple | None = None
-        self._uses = uses
+        self._users = set(users)
+        self._on_drop = on_drop
 
     def fitted(self) -> tuple:
         """``session_fit``'s ``(fit or None, observations, n_doubt)``."""
@@ -83,19 +88,31 @@ class SessionFit:
                 self._value = session_fit(self._make_input(), self._rig, self._options)
             return self._value
 
-    def release(self) -> bool:
-        """One of its ``uses`` done: after the last (True), the fit and its input are
-        dropped (a 90-minute match's fit holds hundreds of MB)."""
+    def release(self, user: str = "typeA") -> bool:
+        """``user``'s use done (again: nothing more); after the last user's (True), the fit
+        and its input are dropped (a 90-minute match's fit holds hundreds of MB)."""
         with self._lock:
-            self._uses -= 1
-            if self._uses <= 0:
-                self._value, self._make_input = None, None
-                return True
-            return False
+            if user not in self._users:
+                return False
+            self._users.discard(user)
+            if self._users:
+                return False
+            self._value, self._make_input = None, None
+            on_drop, self._on_drop = self._on_drop, None
+        if on_drop is not None:
+            on_drop()
+        return True
 
     def breaks_ns(self) -> np.ndarray:
         """(k,) int64, sorted: the fit's break instants (:func:`session_breaks_ns`)."""
         return session_breaks_ns(self.fitted()[0])
+
+    def take_breaks(self) -> np.ndarray:
+        """:meth:`breaks_ns`, then type A's use released (its backward pass needs no more of
+        the fit)."""
+        breaks = self.breaks_ns()
+        self.release("typeA")
+        return breaks
 
 
 #: ``break_source="image"``: a camera's image track shows a velocity jump between two of its
@@ -290,7 +307,7 @@ def across_breaks(prep: Prepared, track: Track, rig: Rig, options,
     backward pass: ``options`` with ``confirm_breaks`` off). A replaced point takes every
     column of the backward point, its ``span_s`` negated (the point's time minus the latest
     capture it uses). The other points are ``track``'s rows, unchanged. ``breaks_ns``: the
-    fit's breaks, given, or a callable that gives them (a :class:`SessionFit`'s ``breaks_ns``:
+    fit's breaks, given, or a callable that gives them (a :class:`SessionFit`'s ``take_breaks``:
     the fit of ``smooth``'s own input, called once the forward track is made); None: the fit
     of ``prep`` (:func:`fit_breaks_ns`)."""
     if not len(track) or "span_s" not in track.quality:
