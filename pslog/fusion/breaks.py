@@ -177,7 +177,9 @@ def image_kicks_ns(prep: Prepared, track: Track, rig: Rig, options) -> np.ndarra
     v_f (s - t_p1) + ½ a (s - t_p1)²`` and ``b(s) = u_n1 + v_b (s - t_n1) + ½ a (s - t_n1)²``
     with ``v_f``, ``v_b`` the chords' velocities moved to ``t_p1`` and ``t_n1``; their
     difference is linear in ``s`` (the squares cancel), ``D(s) = A + B s``, and ``s* = -A·B /
-    |B|²``, clipped to ``[t_p1, t_n1]``. The cameras' instants within
+    |B|²``, clipped to ``[t_p1, t_n1]``. A jump at the pair after another (its ``p1`` the
+    other's ``n1``) is that kick's echo, not a second one: its forward line runs through the
+    kick and its meeting falls at its ``p1``, late; it is left out. The cameras' instants within
     :data:`IMAGE_KICK_MERGE_S` of each other are one kick at their mean weighted by ``|B|²``
     (``s*``'s precision: σ / |B| per axis).
 
@@ -250,6 +252,10 @@ def image_kicks_ns(prep: Prepared, track: Track, rig: Rig, options) -> np.ndarra
         with np.errstate(invalid="ignore"):
             bound = IMAGE_KICK_SIGMAS * sigma * root + 0.5 * G * tn1 * (tn1 - tp2) * per_m
             jump = (z > 0) & np.isfinite(per_m) & (miss > bound)
+        # a kick between p1 and n1 shows again at the next pair (p1 + 1 its p1), whose
+        # forward line runs through the kick: its meeting is that pair's p1 (n1 here), late
+        # by n1's time less the kick's; the first of two consecutive pairs is the kick's
+        jump[jump] = ~np.isin(p1[jump] - 1, p1[jump])
         if not np.any(jump):
             continue
         a = np.where(np.isfinite(accel), accel, 0.0)[jump]
