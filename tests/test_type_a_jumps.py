@@ -95,7 +95,7 @@ def test_a_throws_bounce_is_its_one_instant():
     t = np.linspace(0.0, motion.duration, 200001)
     bounce = t[np.argmin(motion.position(t)[:, 2])]
     assert len(instants) == 1
-    assert abs(instants[0] / 1e9 - bounce) < 3e-3  # (measured: 2.3 ms)
+    assert abs(instants[0] / 1e9 - bounce) < 1.5e-3  # (measured: 0.5 ms; 2.3 with the echo)
 
 
 def test_a_noise_free_rallys_jumps_to_a_few_milliseconds():
@@ -141,7 +141,7 @@ def test_the_far_point_after_a_kick_is_replaced_without_a_fit(monkeypatch):
     rows = np.flatnonzero(np.isin(_key(before), _key(after)[~replaced]))
     assert_array_equal(after.time_ns[~replaced], before.time_ns[rows])
     assert_array_equal(after.position_world[~replaced], before.position_world[rows])
-    assert after.dropped.get("break", 0) <= 12  # (measured: 9 of 825; the fit's 2)
+    assert after.dropped.get("break", 0) <= 5  # (measured: 2 of 823, the fit's 2; 9 with the echo)
     # the fit's breaks replace the same far point
     assert np.count_nonzero(errors_m(fuse(obs, rig, "typeA", BREAKS), truth) > 0.05) == 0
 
