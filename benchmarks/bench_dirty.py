@@ -96,7 +96,7 @@ from _rigs import ring_rig  # noqa: E402
 
 from pslog import Rig, apply_timing, builtin_rig  # noqa: E402
 from pslog.evaluation import errors_m  # noqa: E402
-from pslog.fusion import CONFIRM_GAPS, METHODS, FusionOptions  # noqa: E402
+from pslog.fusion import CONFIRM_BREAK_SOURCE, CONFIRM_GAPS, METHODS, FusionOptions  # noqa: E402
 from pslog.fusion.gating import fuse_detections  # noqa: E402
 from pslog.motion import get_motion, rally_motion  # noqa: E402
 from pslog.simulation import SimulationOptions, simulate_labelled  # noqa: E402
@@ -520,7 +520,10 @@ def main() -> int:
     json_rows = []
     n_seeds, duration = (1, 4.0) if args.quick else (args.seeds, args.duration)
     methods = [m for m in args.methods.split(",") if m in METHODS]
-    options = FusionOptions(gating=args.gating == "on", **dict(zip(
+    # (jumps: breaks' rule with the images' kick instants, not smooth's fit's)
+    options = FusionOptions(gating=args.gating == "on",
+                            break_source=CONFIRM_BREAK_SOURCE.get(args.confirm_gaps, "fit"),
+                            **dict(zip(
         ("confirm_gaps", "confirm_every", "confirm_sides", "confirm_breaks"),
         CONFIRM_GAPS[args.confirm_gaps],
         strict=True)))

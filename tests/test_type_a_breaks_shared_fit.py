@@ -139,3 +139,30 @@ def test_the_clocks_covariance_moves_no_break(session, alone, monkeypatch):
     _same(both["typeA"], type_a)
     assert_array_equal(type_a.position_world, alone[0].position_world)
     assert np.all(type_a.quality["std_m"] > alone[0].quality["std_m"] - 1e-15)
+
+
+def test_type_a_lets_the_fit_go_once_it_has_the_breaks(session):
+    """Type A's use of the shared fit ends when it has the breaks (its backward pass, the
+    peak of a ``breaks`` fuse, does not hold the fit and ``smooth``'s input); ``smooth``'s
+    use keeps it until ``smooth`` is done; each use released once; the input dropped
+    (``on_drop``) with the last."""
+    from pslog.fusion import default_max_gap_s, prepare
+    from pslog.fusion.breaks import SessionFit
+
+    rig, detections = session
+    obs = detections.best()
+    prep = prepare(obs, rig)
+    options = replace(BREAKS, max_gap_s=default_max_gap_s(rig))
+    dropped: list = []
+    alone = SessionFit(lambda: prep, rig, options, on_drop=lambda: dropped.append("alone"))
+    breaks = alone.take_breaks()
+    assert len(breaks) and dropped == ["alone"]
+    with pytest.raises(RuntimeError, match="after its last release"):
+        alone.fitted()
+    both = SessionFit(lambda: prep, rig, options, ("typeA", "smooth"),
+                      on_drop=lambda: dropped.append("both"))
+    assert_array_equal(both.take_breaks(), breaks)
+    assert not both.release("typeA")  # (released already: nothing more)
+    assert both.fitted()[0] is not None and dropped == ["alone"]
+    assert both.release("smooth") and dropped == ["alone", "both"]
+    assert not both.release("smooth")

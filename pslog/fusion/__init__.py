@@ -679,13 +679,14 @@ def fuse(
     elif method == "typeA" and resolved.confirm_breaks and resolved.break_source == "fit":
         fit = (smooth_fit if smooth_fit is not None
                else _smooth_fit_of(given, prep, rig, options, resolved))
-        # (called once the forward track is made: a fit made meanwhile is not waited for)
-        breaks: np.ndarray | Callable[[], np.ndarray] = fit.breaks_ns
+        # (called once the forward track is made: a fit made meanwhile is not waited for;
+        # type A's use of the fit released then: the backward pass does not hold it)
+        breaks: np.ndarray | Callable[[], np.ndarray] = fit.take_breaks
         if options.clock_covariance is not None:
             # the breaks of the session's fit are a decision, taken as it was in the
             # clocks' perturbed runs (pslog.fusion.clock): fitted once, not once per run
             # (2 m + 1 fits of smooth for m clock directions otherwise)
-            breaks = fit.breaks_ns()
+            breaks = fit.take_breaks()
         function = partial(_type_a, breaks_ns=breaks)
     elif (method == "typeA" and resolved.confirm_breaks and options.clock_covariance is not None):
         # the image's kick instants, a decision taken as it was in the clocks' perturbed runs

@@ -62,15 +62,20 @@ class SessionFit:
     it. So a ``pslog fuse`` of both fits once, and type A's breaks are the same whether
     ``smooth`` is fused beside it or not (its breaks do not depend on the clocks' consider
     covariance that only ``smooth``'s own track needs). ``options``: FusionOptions with
-    ``max_gap_s`` set, ``smooth``'s."""
+    ``max_gap_s`` set, ``smooth``'s. ``users``: the methods that use it (``"smooth"``,
+    ``"typeA"``), each releasing its use once (:meth:`release`; type A as soon as it has
+    the breaks, :meth:`take_breaks`: its backward pass does not hold the fit); after the
+    last, the fit and its input are dropped and ``on_drop`` is called."""
 
     def __init__(self, make_input: Callable[[], Prepared], rig: Rig, options,
-                 uses: int = 1) -> None:
+                 users: tuple[str, ...] = ("typeA",),
+                 on_drop: Callable[[], object] | None = None) -> None:
         self._make_input: Callable[[], Prepared] | None = make_input
         self._rig, self._options = rig, options
         self._lock = threading.Lock()
         self._value: tuple | None = None
-        self._uses = uses
+        self._users = set(users)
+        self._on_drop = on_drop
 
     def fitted(self) -> tuple:
         """``session_fit``'s ``(fit or None, observations, n_doubt)``."""
@@ -83,19 +88,31 @@ class SessionFit:
                 self._value = session_fit(self._make_input(), self._rig, self._options)
             return self._value
 
-    def release(self) -> bool:
-        """One of its ``uses`` done: after the last (True), the fit and its input are
-        dropped (a 90-minute match's fit holds hundreds of MB)."""
+    def release(self, user: str = "typeA") -> bool:
+        """``user``'s use done (again: nothing more); after the last user's (True), the fit
+        and its input are dropped (a 90-minute match's fit holds hundreds of MB)."""
         with self._lock:
-            self._uses -= 1
-            if self._uses <= 0:
-                self._value, self._make_input = None, None
-                return True
-            return False
+            if user not in self._users:
+                return False
+            self._users.discard(user)
+            if self._users:
+                return False
+            self._value, self._make_input = None, None
+            on_drop, self._on_drop = self._on_drop, None
+        if on_drop is not None:
+            on_drop()
+        return True
 
     def breaks_ns(self) -> np.ndarray:
         """(k,) int64, sorted: the fit's break instants (:func:`session_breaks_ns`)."""
         return session_breaks_ns(self.fitted()[0])
+
+    def take_breaks(self) -> np.ndarray:
+        """:meth:`breaks_ns`, then type A's use released (its backward pass needs no more of
+        the fit)."""
+        breaks = self.breaks_ns()
+        self.release("typeA")
+        return breaks
 
 
 #: ``break_source="image"``: a camera's image track shows a velocity jump between two of its
@@ -160,7 +177,9 @@ def image_kicks_ns(prep: Prepared, track: Track, rig: Rig, options) -> np.ndarra
     v_f (s - t_p1) + ½ a (s - t_p1)²`` and ``b(s) = u_n1 + v_b (s - t_n1) + ½ a (s - t_n1)²``
     with ``v_f``, ``v_b`` the chords' velocities moved to ``t_p1`` and ``t_n1``; their
     difference is linear in ``s`` (the squares cancel), ``D(s) = A + B s``, and ``s* = -A·B /
-    |B|²``, clipped to ``[t_p1, t_n1]``. The cameras' instants within
+    |B|²``, clipped to ``[t_p1, t_n1]``. A jump at the pair after another (its ``p1`` the
+    other's ``n1``) is that kick's echo, not a second one: its forward line runs through the
+    kick and its meeting falls at its ``p1``, late; it is left out. The cameras' instants within
     :data:`IMAGE_KICK_MERGE_S` of each other are one kick at their mean weighted by ``|B|²``
     (``s*``'s precision: σ / |B| per axis).
 
@@ -233,6 +252,10 @@ def image_kicks_ns(prep: Prepared, track: Track, rig: Rig, options) -> np.ndarra
         with np.errstate(invalid="ignore"):
             bound = IMAGE_KICK_SIGMAS * sigma * root + 0.5 * G * tn1 * (tn1 - tp2) * per_m
             jump = (z > 0) & np.isfinite(per_m) & (miss > bound)
+        # a kick between p1 and n1 shows again at the next pair (p1 + 1 its p1), whose
+        # forward line runs through the kick: its meeting is that pair's p1 (n1 here), late
+        # by n1's time less the kick's; the first of two consecutive pairs is the kick's
+        jump[jump] = ~np.isin(p1[jump] - 1, p1[jump])
         if not np.any(jump):
             continue
         a = np.where(np.isfinite(accel), accel, 0.0)[jump]
@@ -290,7 +313,7 @@ def across_breaks(prep: Prepared, track: Track, rig: Rig, options,
     backward pass: ``options`` with ``confirm_breaks`` off). A replaced point takes every
     column of the backward point, its ``span_s`` negated (the point's time minus the latest
     capture it uses). The other points are ``track``'s rows, unchanged. ``breaks_ns``: the
-    fit's breaks, given, or a callable that gives them (a :class:`SessionFit`'s ``breaks_ns``:
+    fit's breaks, given, or a callable that gives them (a :class:`SessionFit`'s ``take_breaks``:
     the fit of ``smooth``'s own input, called once the forward track is made); None: the fit
     of ``prep`` (:func:`fit_breaks_ns`)."""
     if not len(track) or "span_s" not in track.quality:

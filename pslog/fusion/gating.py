@@ -3468,16 +3468,18 @@ def start_fusion(detections: Detections, rig: Rig, methods, options=None, *,
         fit_options = replace(options, max_gap_s=options.max_gap_s or default_max_gap_s(rig))
         if "smooth" not in methods:  # (only smooth's own track needs the clocks' consider)
             fit_options = replace(fit_options, clock_covariance=None)
+        # (smooth's gated input, kept for smooth's own fusion, goes with the fit's last use)
         fit_of.append(SessionFit(make_input, rig, fit_options,
-                                 uses=1 + ("smooth" in methods)))
+                                 ("typeA", "smooth") if "smooth" in methods else ("typeA",),
+                                 on_drop=made_input.clear))
 
     def fused_with_fit(method: str, observations, prep):
         fit = fit_of[0] if fit_of and method in ("smooth", "typeA") else None
         try:
             return fuse(observations, rig, method, options, prepared=prep, smooth_fit=fit)
         finally:
-            if fit is not None and fit.release():
-                made_input.clear()  # (its arrays go with the fit's last use)
+            if fit is not None:
+                fit.release(method)  # (type A's already, once it had the breaks)
 
     if not options.gating:
         obs = timed_observations(detections, rig)
