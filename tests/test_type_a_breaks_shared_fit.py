@@ -166,3 +166,18 @@ def test_type_a_lets_the_fit_go_once_it_has_the_breaks(session):
     assert both.fitted()[0] is not None and dropped == ["alone"]
     assert both.release("smooth") and dropped == ["alone", "both"]
     assert not both.release("smooth")
+
+
+def test_fuse_all_of_observations_fits_once(session, monkeypatch):
+    """:func:`pslog.fusion.fuse_all` of Observations (no gate: every method's one
+    preparation) shares the fit as ``start_fusion`` does: one fit for type A and ``smooth``,
+    type A's points those of type A fused alone."""
+    from pslog.fusion import fuse_all
+
+    rig, detections = session
+    obs = detections.best()
+    alone = fuse(obs, rig, "typeA", BREAKS)
+    fits = _counted(monkeypatch)
+    both = fuse_all(obs, rig, ["smooth", "typeA"], BREAKS)
+    assert len(fits) == 1  # (two: each method fitted its own)
+    _same(both["typeA"], alone)

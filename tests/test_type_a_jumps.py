@@ -160,3 +160,34 @@ def test_pslog_fuse_confirm_gaps_jumps(tmp_path):
     line = next(x for x in out.splitlines() if x.startswith("typeA"))
     assert ("made from the detections after them (--confirm-gaps jumps: the paper's "
             "construction spanned a kick the cameras' images show; span_s < 0)") in line, out
+
+
+def test_jumps_with_a_synced_sessions_clock_covariance():
+    """A synced session's clock covariance re-runs type A on moved pixels; the images'
+    instants are a decision taken once, as the fit's breaks: the same points as without the
+    covariance, each with its consider covariance added (``std_m`` never smaller)."""
+    from pslog.timing import ClockCovariance
+
+    rig, det, _truth, _kicks = _session()
+    obs = det.best()
+    plain = fuse(obs, rig, "typeA", JUMPS)
+    clock = ClockCovariance([1, 2, 3], [0, 0, 0], np.diag([0.5e-3] * 3) ** 2)
+    synced = fuse(obs, rig, "typeA", replace(JUMPS, clock_covariance=clock))
+    assert_array_equal(synced.time_ns, plain.time_ns)
+    assert_array_equal(synced.position_world, plain.position_world)
+    assert np.count_nonzero(synced.quality["span_s"] < 0) >= 5
+    assert np.all(synced.quality["std_m"] >= plain.quality["std_m"] - 1e-15)
+    assert np.any(synced.quality["std_m"] > plain.quality["std_m"])
+
+
+def test_pslog_fuse_says_when_jumps_changed_nothing(tmp_path):
+    """A flight without a jump: the option's line says no point spanned a kick the images
+    show (not left to be guessed from a line like the default's)."""
+    from pslog.cli.fuse import NO_BREAK_SPANNED
+
+    session = tmp_path / "s.mcap"
+    pslog_ok("simulate", "--rig", "paper3", "--timing", "typeA", "--motion", "straight",
+             "--noise-px", "0.3", "--seed", "77004", "-o", session)
+    out = pslog_ok("fuse", session, "-o", tmp_path / "f.mcap", "--method", "typeA",
+                   "--confirm-gaps", "jumps")
+    assert NO_BREAK_SPANNED["image"] in out.splitlines(), out

@@ -746,7 +746,19 @@ def fuse_all(
         raise FusionError(f"fusion needs at least two cameras; rig has {len(rig)}")
     check_tolerance(rig, (options or FusionOptions()).tolerance_s)
     prep = prepare(observations, rig)
-    return {m: fuse(observations, rig, m, options, prepared=prep) for m in methods}
+    from .breaks import fit_shared, shared_fit  # (typeA's confirm_breaks and smooth)
+
+    resolved = options or FusionOptions()
+    fit = (shared_fit(methods, rig, resolved, lambda: prep)
+           if fit_shared(methods, rig, resolved) else None)
+    tracks = {}
+    for m in methods:
+        uses = m in ("typeA", "smooth")
+        tracks[m] = fuse(observations, rig, m, options, prepared=prep,
+                         smooth_fit=fit if uses else None)
+        if uses and fit is not None:
+            fit.release(m)
+    return tracks
 
 
 def explain_type_a(

@@ -115,6 +115,30 @@ class SessionFit:
         return breaks
 
 
+def fit_shared(methods, rig: Rig, options) -> bool:
+    """Whether type A's ``confirm_breaks`` takes a fit's breaks (its ``"fit"`` source)
+    when ``methods`` fuse one session under ``options`` (FusionOptions): then it and
+    ``smooth`` share one :func:`shared_fit`."""
+    return bool("typeA" in methods and options.confirm_breaks
+                and options.break_source == "fit" and len(rig) >= 2)
+
+
+def shared_fit(methods, rig: Rig, options, make_input: Callable[[], Prepared],
+               on_drop: Callable[[], object] | None = None) -> SessionFit:
+    """The :class:`SessionFit` that type A's ``confirm_breaks`` and ``smooth`` share when
+    ``methods`` fuse one session (:func:`fit_shared`; ``make_input``: ``smooth``'s prepared
+    input; ``options``: the fusion's FusionOptions): with ``smooth`` among the methods the
+    fit is its own (its options, the clocks' consider covariance too), without it the
+    breaks' alone (no consider)."""
+    from ._prepare import default_max_gap_s
+
+    fit_options = replace(options, max_gap_s=options.max_gap_s or default_max_gap_s(rig))
+    if "smooth" not in methods:  # (only smooth's own track needs the clocks' consider)
+        fit_options = replace(fit_options, clock_covariance=None)
+    return SessionFit(make_input, rig, fit_options,
+                      ("typeA", "smooth") if "smooth" in methods else ("typeA",), on_drop)
+
+
 #: ``break_source="image"``: a camera's image track shows a velocity jump between two of its
 #: detections ``p1``, ``n1`` where the line through ``p2, p1`` misses ``n1`` by more than this
 #: many σ of its noise (plus gravity's bend: :func:`image_kicks_ns`). Chosen on development

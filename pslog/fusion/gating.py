@@ -68,7 +68,7 @@ import sys
 import threading
 from bisect import bisect_left, bisect_right
 from collections import deque
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from itertools import pairwise
 from typing import TYPE_CHECKING, Literal
 
@@ -3456,22 +3456,15 @@ def start_fusion(detections: Detections, rig: Rig, methods, options=None, *,
     workers = default_workers(len(methods)) if workers is None else workers
     # type A's confirm_breaks takes its kick instants from smooth's fit of the session:
     # made once, by smooth's fusion or type A's, whichever asks first (the other waits)
-    sharing = ("typeA" in methods and options.confirm_breaks and options.break_source == "fit"
-               and len(rig) >= 2)
+    from .breaks import fit_shared, shared_fit
+
+    sharing = fit_shared(methods, rig, options)
     fit_of: list = []  # [SessionFit] when sharing, given smooth's input's maker
     made_input: dict = {}  # smooth's gated input when sharing (the fit's and smooth's)
 
     def share_fit(make_input) -> None:
-        from . import default_max_gap_s
-        from .breaks import SessionFit
-
-        fit_options = replace(options, max_gap_s=options.max_gap_s or default_max_gap_s(rig))
-        if "smooth" not in methods:  # (only smooth's own track needs the clocks' consider)
-            fit_options = replace(fit_options, clock_covariance=None)
         # (smooth's gated input, kept for smooth's own fusion, goes with the fit's last use)
-        fit_of.append(SessionFit(make_input, rig, fit_options,
-                                 ("typeA", "smooth") if "smooth" in methods else ("typeA",),
-                                 on_drop=made_input.clear))
+        fit_of.append(shared_fit(methods, rig, options, make_input, made_input.clear))
 
     def fused_with_fit(method: str, observations, prep):
         fit = fit_of[0] if fit_of and method in ("smooth", "typeA") else None
