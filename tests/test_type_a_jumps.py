@@ -80,7 +80,7 @@ def _instants(rig, motion, duration, noise_px=0.0, seed=0):
     obs = det.best()
     options = replace(JUMPS, max_gap_s=default_max_gap_s(rig))
     prep = rays_only(prepare(obs, rig))[0]
-    forward = _type_a(prep, rig, replace(options, confirm_breaks=False))
+    forward = _type_a(prep, rig, replace(options, confirm_breaks=False, break_source="fit"))
     return image_kicks_ns(prep, forward, rig, options), det
 
 
@@ -149,6 +149,9 @@ def test_the_far_point_after_a_kick_is_replaced_without_a_fit(monkeypatch):
 def test_break_source_is_checked():
     with pytest.raises(FusionError, match="break source must be one of fit, image, got 'x'"):
         FusionOptions(break_source="x")
+    # (an image source alone would change nothing: said, not ignored)
+    with pytest.raises(FusionError, match="break source 'image' needs confirm_breaks"):
+        FusionOptions(break_source="image")
 
 
 def test_pslog_fuse_confirm_gaps_jumps(tmp_path):

@@ -206,6 +206,10 @@ class FusionOptions:
         if self.break_source not in BREAK_SOURCES:
             raise FusionError(f"typeA's break source must be one of {', '.join(BREAK_SOURCES)}, "
                               f"got {self.break_source!r}")
+        if self.break_source != BREAK_SOURCES[0] and not self.confirm_breaks:
+            raise FusionError(f"typeA's break source {self.break_source!r} needs "
+                              "confirm_breaks (it is where that rule takes its kick "
+                              "instants: pslog fuse --confirm-gaps jumps)")
         if self.confirm_every and not self.confirm_gaps:
             raise FusionError("typeA's confirm_every needs confirm_gaps (it confirms every "
                               "point as confirm_gaps confirms the long-gap ones)")
@@ -695,7 +699,8 @@ def fuse(
         from .breaks import image_kicks_ns
 
         rays = rays_only(prep)[0]
-        forward = _type_a(rays, rig, replace(resolved, confirm_breaks=False))
+        forward = _type_a(rays, rig, replace(resolved, confirm_breaks=False,
+                                             break_source="fit"))
         function = partial(_type_a, breaks_ns=image_kicks_ns(rays, forward, rig, resolved))
     track = function(prep, rig, resolved)
     if options.clock_covariance is not None and not METHODS[method].own_clock_consider:

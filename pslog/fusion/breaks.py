@@ -350,7 +350,7 @@ def across_breaks(prep: Prepared, track: Track, rig: Rig, options,
     if not np.any(spanning):
         return track
     rprep, t0 = reversed_prepared(prep, rig)
-    back = type_a(rprep, rig, replace(options, confirm_breaks=False))
+    back = type_a(rprep, rig, replace(options, confirm_breaks=False, break_source="fit"))
     tb = t0 - back.time_ns  # each backward point's time, forward
     # the backward point on each forward point's detection (its time and camera)
     idx, has = matching_rows(point_keys(t, track.camera), point_keys(tb, back.camera))

@@ -466,7 +466,7 @@ class LiveFuser:
         self.options = replace(options or FusionOptions(tolerance_s=default_tolerance(rig)),
                                confirm_gaps=False,
                                confirm_every=False, confirm_sides=False,
-                               confirm_breaks=False,
+                               confirm_breaks=False, break_source="fit",
                                filter_hold_nis=None)
         # without gating a frame's candidates cannot be told apart: its best one alone, as
         # fuse() does with gating off
