@@ -13,13 +13,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from _rally import dirty_rally
-from _stages import first_arguments
+from _stages import rally_arguments
 
-from pslog import apply_timing, builtin_rig
 from pslog.estimation import trajectory
 from pslog.records import NS
-from pslog.simulation import SimulationOptions, simulate
 
 SEED = 74014
 
@@ -28,11 +25,7 @@ SEED = 74014
 def confirm_arguments():
     """The arguments ``fit_trajectory`` gives ``_confirmed_breaks`` first on an 8-second
     rally of ``paper2`` with misses (a copy), and the rally's kicks (s)."""
-    rig = apply_timing(builtin_rig("paper2"), "typeA")
-    motion, kicks = dirty_rally(SEED)
-    detections, _ = simulate(rig, motion, 8.0, SimulationOptions(
-        noise_px=0.3, seed=SEED, miss_rate=0.1, drop_rate=0.05))
-    return first_arguments("_confirmed_breaks", detections.best(), rig), np.asarray(kicks)
+    return rally_arguments("_confirmed_breaks", "paper2", SEED)
 
 
 def test_two_breaks_at_kicks_80_ms_apart_are_both_confirmed(confirm_arguments):

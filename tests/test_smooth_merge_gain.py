@@ -16,13 +16,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from _rally import dirty_rally
-from _stages import first_arguments
+from _stages import rally_arguments
 
-from pslog import apply_timing, builtin_rig
 from pslog.estimation import trajectory
 from pslog.records import NS
-from pslog.simulation import SimulationOptions, simulate
 
 SEED = 74228
 
@@ -32,11 +29,7 @@ def refine_arguments():
     """The arguments ``fit_trajectory`` gives ``_refine_breaks`` on an 8-second rally of
     ``paper3`` with 10 % of the detections missed (a copy: the fit goes on with its problem
     afterwards), and the rally's kicks (s)."""
-    rig = apply_timing(builtin_rig("paper3"), "typeA")
-    motion, kicks = dirty_rally(SEED)
-    detections, _ = simulate(rig, motion, 8.0, SimulationOptions(
-        noise_px=0.3, seed=SEED, miss_rate=0.1, drop_rate=0.05))
-    return first_arguments("_refine_breaks", detections.best(), rig), np.asarray(kicks)
+    return rally_arguments("_refine_breaks", "paper3", SEED)
 
 
 def test_of_two_breaks_refined_into_one_span_the_one_that_gains_more_stays(refine_arguments):
