@@ -110,8 +110,7 @@ def test_fuse_of_type_a_alone_fits_smooths_input(session, alone, monkeypatch):
     assert len(fits) == 1
     resolved = replace(BREAKS, max_gap_s=default_max_gap_s(rig))
     causal = gate_for(detections, rig, "typeA", BREAKS)
-    fitted = _smooth_fit_of(detections, prepared_for(causal, rig), rig, BREAKS,
-                            resolved).fitted()[1]
+    fitted = _smooth_fit_of(detections, prepared_for(causal, rig), rig, BREAKS).fitted()[1]
     own = smooth.session_fit(prepared_for(gate_for(detections, rig, "smooth", BREAKS), rig),
                              rig, resolved)[1]
     assert_array_equal(fitted.time_ns, own.time_ns)
@@ -119,8 +118,8 @@ def test_fuse_of_type_a_alone_fits_smooths_input(session, alone, monkeypatch):
     assert len(fitted) != len(causal.observations)
     # Observations (no gate): every method's own preparation is the fit's input
     obs = detections.best()
-    assert_array_equal(_smooth_fit_of(obs, prepare(obs, rig), rig, BREAKS, resolved
-                                      ).fitted()[1].uv, obs.uv)
+    assert_array_equal(_smooth_fit_of(obs, prepare(obs, rig), rig, BREAKS).fitted()[1].uv,
+                       obs.uv)
 
 
 def test_the_clocks_covariance_moves_no_break(session, alone, monkeypatch):

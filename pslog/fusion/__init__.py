@@ -682,7 +682,7 @@ def fuse(
         function = partial(_smooth, fitted=smooth_fit.fitted)
     elif method == "typeA" and resolved.confirm_breaks and resolved.break_source == "fit":
         fit = (smooth_fit if smooth_fit is not None
-               else _smooth_fit_of(given, prep, rig, options, resolved))
+               else _smooth_fit_of(given, prep, rig, options))
         # (called once the forward track is made: a fit made meanwhile is not waited for;
         # type A's use of the fit released then: the backward pass does not hold it)
         breaks: np.ndarray | Callable[[], np.ndarray] = fit.take_breaks
@@ -711,22 +711,21 @@ def fuse(
 
 
 def _smooth_fit_of(observations: Observations | Detections, prep: Prepared, rig: Rig,
-                   options: FusionOptions, resolved: FusionOptions):
+                   options: FusionOptions):
     """The :class:`~pslog.fusion.breaks.SessionFit` of ``smooth``'s input of a session that
-    :func:`fuse` fuses with typeA's ``confirm_breaks`` alone: Detections gated as ``smooth``
-    gates them (with ``options.gating`` and two cameras or more; as :func:`fuse` gates),
-    else ``prep`` (every method's; ``resolved``: ``options`` with ``max_gap_s`` set). No
-    clocks' consider covariance: the breaks do not need it."""
-    from .breaks import SessionFit
+    :func:`fuse` fuses with typeA's ``confirm_breaks`` alone (:func:`pslog.fusion.breaks.
+    shared_fit` for type A without ``smooth``: no clocks' consider covariance, the breaks do
+    not need it): Detections gated as ``smooth`` gates them (with ``options.gating`` and two
+    cameras or more; as :func:`fuse` gates), else ``prep`` (every method's)."""
+    from .breaks import shared_fit
 
-    fit_options = replace(resolved, clock_covariance=None)
     if isinstance(observations, Detections) and options.gating and len(rig) >= 2:
         from .gating import gate_for, prepared_for
 
         detections = observations
-        return SessionFit(lambda: prepared_for(gate_for(detections, rig, "smooth", options),
-                                               rig), rig, fit_options)
-    return SessionFit(lambda: prep, rig, fit_options)
+        return shared_fit(("typeA",), rig, options, lambda: prepared_for(
+            gate_for(detections, rig, "smooth", options), rig))
+    return shared_fit(("typeA",), rig, options, lambda: prep)
 
 
 def fuse_all(

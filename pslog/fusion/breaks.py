@@ -221,10 +221,12 @@ def image_kicks_ns(prep: Prepared, track: Track, rig: Rig, options) -> np.ndarra
     # term 0: the bound is at least that), then the test itself on those, with one call
     # for the session's noise at their times (a vectorised pass; the whole test on every
     # pair took 1.7 CPU s at 90 minutes, this 0.2)
+    if len(track) < 2:  # (no depths to bound gravity's bend with)
+        return np.zeros(0, np.int64)
     found = []
     for c in range(len(prep.cameras)):
         rows = prep.per_camera[c]
-        if len(rows) < 4 or len(track) < 2:
+        if len(rows) < 4:
             continue
         t = obs.time_ns[rows]
         u = prep.uv_undistorted[rows]
