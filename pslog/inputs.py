@@ -30,6 +30,20 @@ def file_kind(mode: int) -> str:
     return "not a regular file"
 
 
+def binary_format(head: bytes, path: str | Path) -> str | None:
+    """``"parquet"`` or ``"c3d"`` when a file's first bytes ``head`` (and, for C3D, whose
+    magic is two bytes, its ``.c3d`` suffix) say it is one of the binary files ``pslog
+    export`` writes, else None: the text readers name it instead of a byte that is no text.
+    Parquet starts with ``PAR1``; C3D with its first parameter block's number (2-127) and
+    the key 0x50."""
+    if head.startswith(b"PAR1"):
+        return "parquet"
+    if (len(head) >= 2 and head[1] == 0x50 and 2 <= head[0] < 128
+            and str(path).lower().endswith(".c3d")):
+        return "c3d"
+    return None
+
+
 def not_there(path: str | Path) -> str | None:
     """Why ``path`` cannot be opened although something may be named so, or None if it can
     be examined or is simply missing (``Path.exists`` is False for both a missing file and

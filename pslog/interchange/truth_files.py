@@ -39,7 +39,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from ..inputs import check_input_file
+from ..inputs import binary_format, check_input_file
 from ..log._mcapio import starts_as_mcap
 from ..log.csvio import csv_rows
 from ..records import NS, Track, Truth
@@ -105,10 +105,11 @@ def read_truth_file(path: str | Path) -> TruthFile:
                          f"or a TUM file; a session's own truth needs no --truth)")
 
     def binary(byte: int, why: str = "is not UTF-8 text") -> InputError:
-        if data.startswith(b"PAR1"):
+        kind = binary_format(data, path)
+        if kind == "parquet":
             return InputError(f"{path} is a Parquet file, not a truth trajectory (a CSV "
                               f"t,x,y,z or a TUM file)")
-        if data[1:2] == b"\x50" and 2 <= data[0] < 128 and path.suffix.lower() == ".c3d":
+        if kind == "c3d":
             return InputError(f"{path} is a C3D file: --truth reads a CSV t,x,y,z (seconds, "
                               f"metres) or a TUM trajectory, not C3D; export the marker's "
                               f"trajectory from your motion-capture software as CSV")

@@ -53,7 +53,7 @@ import numpy as np
 
 from ..camera import MAX_PIXEL as _MAX_PIXEL
 from ..errors import InputError, shell_word
-from ..inputs import check_input_file
+from ..inputs import binary_format, check_input_file
 from ..outputs import replacing
 from ..records import MAX_FRAME_INDEX, NS, Detections
 from ..rig import Rig
@@ -335,11 +335,11 @@ def read_detections_csv(path, rig: Rig, camera: str | None = None,
             raise InputError(f"{path} is an MCAP session, not a detections CSV (export "
                              f"its detections with 'pslog export {shell_word(path)} "
                              f"--detections DET.csv')")
-        if head.startswith(b"PAR1"):  # (--parquet's; any Parquet file)
+        kind = binary_format(head, path)
+        if kind == "parquet":  # (--parquet's; any Parquet file)
             raise InputError(f"{path} is a Parquet file ('pslog export --parquet' writes the "
                              f"fused tracks as one), not a detections CSV (header {expected})")
-        if head[1:2] == b"\x50" and 2 <= head[0] < 128 and str(path).lower().endswith(
-                ".c3d"):  # (a C3D: its first parameter block, then the key 0x50)
+        if kind == "c3d":
             raise InputError(f"{path} is a C3D file (motion-capture points: 'pslog export "
                              f"--c3d' writes the fused tracks as one), not a detections CSV "
                              f"(header {expected}); pslog imports detections, not C3D")
