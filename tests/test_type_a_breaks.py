@@ -197,8 +197,8 @@ def test_a_backward_construction_across_a_break_is_not_used(fused):
     prep = prepare(obs, rig)
     options = replace(BREAKS, max_gap_s=default_max_gap_s(rig))
 
-    def reaching(prep, rig, options):
-        t = _type_a(prep, rig, options)
+    def reaching(prep, rig, options, wanted=None):
+        t = _type_a(prep, rig, options, wanted=wanted)
         quality = dict(t.quality, span_s=np.full(len(t), 100.0))
         return Track(t.method, t.time_ns, t.position_world, t.camera, quality, t.dropped)
 

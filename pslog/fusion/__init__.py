@@ -36,7 +36,7 @@ import numpy as np
 
 from ..camera import MIN_FUSE_NOISE_PX
 from ..errors import FusionError
-from ..records import Detections, Observations, Track, point_keys
+from ..records import Detections, Observations, Track, matching_rows, point_keys
 from ..rig import Rig
 from ..timing import ClockCovariance
 from ..timing import observations as timed_observations
@@ -373,10 +373,15 @@ def _nearest(prep: Prepared, rig: Rig, options: FusionOptions, *, drops: Drops |
 
 
 def _type_a(prep: Prepared, rig: Rig, options: FusionOptions, *,
-            breaks_ns: np.ndarray | Callable[[], np.ndarray] | None = None) -> Track:
+            breaks_ns: np.ndarray | Callable[[], np.ndarray] | None = None,
+            wanted: np.ndarray | None = None) -> Track:
     """Type A's offline track (``breaks_ns``: ``confirm_breaks``' breaks of ``smooth``'s
     fit of the session, given or a callable giving them; None: the fit of ``prep``,
-    :func:`pslog.fusion.breaks.fit_breaks_ns`)."""
+    :func:`pslog.fusion.breaks.fit_breaks_ns`). ``wanted`` ((k,) int64 :func:`pslog.records.
+    point_keys`, or None: every point): only the points on these detections are kept, each
+    with the bits it has in the whole track (the kernel still runs on every detection: its
+    tests' noise is a causal median over every point; the confirmation and the covariance's
+    rescale are elementwise: :func:`pslog.fusion.confirm.confirm_batch`'s ``only``)."""
     from ._prepare import rays_only
     from .confirm import confirm_batch  # (long-gap points confirmed by the next camera)
     from .pseudo import _fuse_type_a, covariance_noise_px, type_a_noise, withhold_uncertain
@@ -390,9 +395,14 @@ def _type_a(prep: Prepared, rig: Rig, options: FusionOptions, *,
     table: list = []
     made = _fuse_type_a(prep, gap, options.noise_px, None, None, None, False,
                         covariance_noise_px(options.noise_px), table)[0]
-    track = (confirm_batch(prep, made, rig, gap, options.noise_px,
-                           every=bool(options.confirm_every), sides=bool(options.confirm_sides))
-             if options.confirm_gaps else made)
+    only = (None if wanted is None
+            else matching_rows(point_keys(made.time_ns, made.camera), wanted)[1])
+    if options.confirm_gaps:
+        track = confirm_batch(prep, made, rig, gap, options.noise_px,
+                              every=bool(options.confirm_every),
+                              sides=bool(options.confirm_sides), only=only)
+    else:
+        track = made if only is None else made.select(only)
     track = withhold_uncertain(type_a_noise(prep, track, gap, options.noise_px,
                                             table[0] if table and track is made else None),
                                options.max_std_m)[0]

@@ -569,7 +569,8 @@ def innovation_waits(across_m2: np.ndarray | float, per_px2: np.ndarray | float,
 
 
 def confirm_batch(prep, track: Track, rig, max_gap_s: float, noise_px: float | None,
-                  every: bool = False, sides: bool = False) -> Track:
+                  every: bool = False, sides: bool = False, only: np.ndarray | None = None
+                  ) -> Track:
     """``track`` (type A's, from ``prep``'s observations) with its waiting points (long gaps,
     re-acquisitions, a large innovation: module docstring) confirmed, contradicted or
     unconfirmed; the dropped ones counted in ``Track.dropped`` (``contradicted``,
@@ -580,6 +581,13 @@ def confirm_batch(prep, track: Track, rig, max_gap_s: float, noise_px: float | N
     can check is kept unless it was a waiting one (as without ``every``). The long-gap
     points' decisions are the same bits either way (the test is elementwise).
 
+    ``only`` ((len(track),) bool, or None: every point): the points wanted; the others are
+    left out of the result untested and uncounted. Each wanted point's decision is the one
+    it has in the whole track's run, bit for bit: the tests are elementwise, and their σ
+    (:func:`confirm_noise`, a causal median over every point made) is taken from the
+    whole track (type A's backward pass, :func:`pslog.fusion.breaks.across_breaks`, needs
+    its points on the few detections a break spans: session 45).
+
     ``sides`` (with ``every``; ``FusionOptions.confirm_sides``): the test is
     :func:`sides_test`'s, against every other camera that can check the point, each on the
     point's side of a velocity jump its track shows, instead of the first confirming
@@ -589,6 +597,13 @@ def confirm_batch(prep, track: Track, rig, max_gap_s: float, noise_px: float | N
     from . import _pseudo_kernel  # (numba: imported at the first use)
     from .innovation import previous_next_rows
     from .pseudo import _all_brackets
+
+    whole_sigma = None
+    if only is not None:
+        whole_sigma = confirm_noise(track.quality["snap_px"], noise_px)[only]
+        track = _with_drops(track, ~only, 0, 0)
+        if not len(track):
+            return track
 
     obs = prep.obs
     time_ns, camera = obs.time_ns, obs.camera
@@ -621,7 +636,8 @@ def confirm_batch(prep, track: Track, rig, max_gap_s: float, noise_px: float | N
 
         floor = DEFAULT_NOISE_PX if noise_px is None else float(noise_px)
         if np.any(innovation_waits(q[_ACROSS], q[_PER_PX2], floor)):
-            sigma = confirm_noise(q["snap_px"], noise_px)
+            sigma = (confirm_noise(q["snap_px"], noise_px) if whole_sigma is None
+                     else whole_sigma)
             kick = innovation_waits(q[_ACROSS], q[_PER_PX2], sigma)
             long = long | kick
     wait = long | every  # (every: all the points)
@@ -629,7 +645,8 @@ def confirm_batch(prep, track: Track, rig, max_gap_s: float, noise_px: float | N
         return track
     # (the tests' noise, a causal median over every point: made only when some point waits)
     if sigma is None:
-        sigma = confirm_noise(q["snap_px"], noise_px)
+        sigma = (confirm_noise(q["snap_px"], noise_px) if whole_sigma is None
+                 else whole_sigma)
     idx = np.flatnonzero(wait)
     cov = [q[k] for k in _COV] if all(k in q for k in _COV) else None
     contradicted, ok = _tests_compiled(
