@@ -7,7 +7,7 @@ the mean error of ``smooth`` and ``filter`` grows at most 20 %, of ``typeA`` at 
 against the clean session; no output point further than 5 cm from the truth. The clean and
 outlier sessions share every ball detection (the faults draw from their own random stream),
 so the ratio measures the faults alone. Both are fused with ``pslog fuse``'s defaults (gating
-on; typeA's ``--confirm-gaps kicks``, ``--confirm-gaps on`` the causal form a stream has);
+on; typeA's ``--confirm-gaps jumps``, ``--confirm-gaps on`` the causal form a stream has);
 ``--gating off`` shows what best-score picking gives instead. The ratios are shown at every
 noise level; the targets are the issue's at 0.3 px (at 0 px the clean errors are the
 methods' own model errors, a fraction of a millimetre, and any change is a large ratio).
@@ -96,7 +96,7 @@ from _rigs import ring_rig  # noqa: E402
 
 from pslog import Rig, apply_timing, builtin_rig  # noqa: E402
 from pslog.evaluation import errors_m  # noqa: E402
-from pslog.fusion import CONFIRM_BREAK_SOURCE, CONFIRM_GAPS, METHODS, FusionOptions  # noqa: E402
+from pslog.fusion import CONFIRM_GAPS, METHODS, FusionOptions, confirm_choice  # noqa: E402
 from pslog.fusion.gating import fuse_detections  # noqa: E402
 from pslog.motion import get_motion, rally_motion  # noqa: E402
 from pslog.simulation import SimulationOptions, simulate_labelled  # noqa: E402
@@ -509,7 +509,8 @@ def main() -> int:
     parser.add_argument("--fps", default=None,
                         help="--more: comma-separated camera rates to run every rig at "
                              "(e.g. 60,120,240; default: the rigs' own, 30)")
-    parser.add_argument("--confirm-gaps", choices=tuple(CONFIRM_GAPS), default="kicks",
+    parser.add_argument("--confirm-gaps", choices=tuple(CONFIRM_GAPS),
+                        default=next(iter(CONFIRM_GAPS)),
                         help="typeA's confirmation, as pslog fuse's option (default "
                              "%(default)s, pslog fuse's; on: the causal form, as a stream)")
     parser.add_argument("--misses", type=float, default=0.0,
@@ -520,13 +521,7 @@ def main() -> int:
     json_rows = []
     n_seeds, duration = (1, 4.0) if args.quick else (args.seeds, args.duration)
     methods = [m for m in args.methods.split(",") if m in METHODS]
-    # (jumps: breaks' rule with the images' kick instants, not smooth's fit's)
-    options = FusionOptions(gating=args.gating == "on",
-                            break_source=CONFIRM_BREAK_SOURCE.get(args.confirm_gaps, "fit"),
-                            **dict(zip(
-        ("confirm_gaps", "confirm_every", "confirm_sides", "confirm_breaks"),
-        CONFIRM_GAPS[args.confirm_gaps],
-        strict=True)))
+    options = FusionOptions(gating=args.gating == "on", **confirm_choice(args.confirm_gaps))
     if args.calibration:
         return main_calibration(args, [m for m in (
             args.methods if args.methods != "typeA,smooth,filter"

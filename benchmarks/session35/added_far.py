@@ -21,7 +21,7 @@ from bench_dirty import faults, more_rigs, more_sessions, rigs  # noqa: E402
 from farpoints import jumps  # noqa: E402
 
 from pslog.evaluation import errors_m  # noqa: E402
-from pslog.fusion import CONFIRM_BREAK_SOURCE, CONFIRM_GAPS, FusionOptions  # noqa: E402
+from pslog.fusion import FusionOptions, confirm_choice  # noqa: E402
 from pslog.fusion.gating import fuse_detections  # noqa: E402
 from pslog.simulation import SimulationOptions, simulate_labelled  # noqa: E402
 
@@ -33,9 +33,7 @@ def main():
     ap.add_argument("--confirm-gaps", default="kicks")
     ap.add_argument("--seeds", type=int, default=3)
     a = ap.parse_args()
-    g, e, s, b = CONFIRM_GAPS[a.confirm_gaps]
-    opt = FusionOptions(confirm_gaps=g, confirm_every=e, confirm_sides=s, confirm_breaks=b,
-                        break_source=CONFIRM_BREAK_SOURCE.get(a.confirm_gaps, "fit"))
+    opt = FusionOptions(**confirm_choice(a.confirm_gaps))
     rig = next(r for r in rigs() + more_rigs() if r.name == a.rig)
     for seed, (label, motion, duration, _k) in enumerate(more_sessions(a.seeds, 8.0, a.first), start=a.first - 300):
         span = motion.duration if duration is None else duration

@@ -93,27 +93,26 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "candidate in the output; off: take each frame's best-scored "
                              "candidate (default %(default)s)")
     parser.add_argument("--confirm-gaps",  # CONFIRM_GAPS
-                        choices=("kicks", "breaks", "jumps", "all", "on", "off"),
+                        choices=("jumps", "kicks", "breaks", "all", "on", "off"),
                         default=None,
-                        help="typeA: kicks (the default): every point is tested against "
-                             "every other camera's track around it, on the point's side of a "
-                             "kick that track shows, and left out as contradicted when the "
-                             "camera shows it elsewhere (offline: the points just after an "
-                             "unseen kick, whose depth the paper's prediction took from the "
-                             "motion before it); breaks: kicks, and a point whose "
-                             "construction spans a velocity break of smooth's fit of the "
-                             "session is replaced by type A's point from the detections after "
-                             "it (time reversed) when that one spans none, else left out "
-                             "(break); jumps: breaks with the kick instants taken from the "
-                             "jumps each camera's image track shows instead of a fit (no "
-                             "smooth fit: cheaper); all: every point tested against the next "
-                             "camera's interpolated track only; on: only a point whose "
-                             "prediction bridged a gap longer than the rig's usual one, or "
-                             "rests on a camera's first detection after a spell without one, "
-                             "waits for the next camera's detection to confirm it (left out "
-                             "as contradicted or unconfirmed otherwise: as a stream does); "
-                             "off: every point at once, the paper's points, as `pslog live` "
-                             "emits them")
+                        help="typeA: jumps (the default): kicks, and a point whose construction "
+                             "spans a kick instant that the cameras' image tracks show (a "
+                             "velocity jump) is replaced by type A's point from the detections "
+                             "after it (time reversed) when that one spans none, else left out "
+                             "(break); kicks: every point is tested against every other camera's "
+                             "track around it, on the point's side of a kick that track shows, "
+                             "and left out as contradicted when the camera shows it elsewhere "
+                             "(offline: the points just after an unseen kick, whose depth the "
+                             "paper's prediction took from the motion before it); breaks: jumps "
+                             "with the kick instants taken from the velocity breaks of smooth's "
+                             "fit of the session instead (a fit: dearer); all: every point "
+                             "tested against the next camera's interpolated track only; on: only "
+                             "a point whose prediction bridged a gap longer than the rig's usual "
+                             "one, or rests on a camera's first detection after a spell without "
+                             "one, waits for the next camera's detection to confirm it (left out "
+                             "as contradicted or unconfirmed otherwise: as a stream does); off: "
+                             "every point at once, the paper's points, as `pslog live` emits "
+                             "them")
     parser.add_argument("--filter-hold", choices=("on", "off"), default="on",
                         help="filter: on: a point whose detection surprised the filter (NIS "
                              "above 2) waits for another camera's next detection and is left "
@@ -145,13 +144,13 @@ def run(args: argparse.Namespace) -> int:
     from pslog._jit import preload
     from pslog.errors import FusionError, RigError, shell_word
     from pslog.fusion import (
-        CONFIRM_BREAK_SOURCE,
         CONFIRM_GAPS,
         FILTER_HOLD_NIS,
         METHODS,
         FusionOptions,
         check_method,
         check_tolerance,
+        confirm_choice,
         default_methods,
         default_tolerance,
         for_session,
@@ -193,15 +192,13 @@ def run(args: argparse.Namespace) -> int:
         check_tolerance(rig, tolerance_s)
     except FusionError as exc:
         return usage_error("fuse", f"argument --tolerance-ms: {exc}")
-    confirm_name = args.confirm_gaps or "kicks"  # (None: not given; said if unused)
-    confirm = CONFIRM_GAPS[confirm_name]
+    confirm_name = args.confirm_gaps or next(iter(CONFIRM_GAPS))  # (None: not given;
+    # said if unused)
     options = FusionOptions(tolerance_s=tolerance_s,
                             max_gap_s=None if args.max_gap_ms is None else args.max_gap_ms / 1e3,
                             rate_hz=args.rate, noise_px=args.noise_px,
                             gating=args.gating == "on",
-                            confirm_gaps=confirm[0], confirm_every=confirm[1],
-                            confirm_sides=confirm[2], confirm_breaks=confirm[3],
-                            break_source=CONFIRM_BREAK_SOURCE.get(confirm_name, "fit"),
+                            **confirm_choice(confirm_name),
                             filter_hold_nis=FILTER_HOLD_NIS if args.filter_hold == "on"
                             else None,
                             max_std_m=None if args.type_a_max_std_mm is None
@@ -378,7 +375,7 @@ def run(args: argparse.Namespace) -> int:
                  + ("them" if n_backward > 1 else "it")
                  + f" (--confirm-gaps {confirm_name}: the paper's construction spanned "
                  f"{BREAK_WORDS[options.break_source]}; span_s < 0)" if n_backward else ""))
-    if options.confirm_breaks and "typeA" in written:
+    if options.confirm_breaks and args.confirm_gaps is not None and "typeA" in written:
         _, dropped, _, _, n_backward = written["typeA"]
         if not n_backward and not dropped.get("break"):
             # the option asked for and nothing to show for it: said, not left to be guessed

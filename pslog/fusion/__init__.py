@@ -58,17 +58,26 @@ FILTER_HOLD_NIS = 2.0
 #: one bridges nothing more, and overflows integer nanoseconds for absurd values.
 MAX_GAP_S = 3600.0
 
-#: ``pslog fuse --confirm-gaps``'s choices, the first the default offline: typeA's
-#: (``confirm_gaps``, ``confirm_every``, ``confirm_sides``, ``confirm_breaks``)
-#: (:class:`FusionOptions`)
-CONFIRM_GAPS = {"kicks": (True, True, True, False), "breaks": (True, True, True, True),
-                "jumps": (True, True, True, True), "all": (True, True, False, False),
+#: ``pslog fuse --confirm-gaps``'s choices, the first the default offline (session 45;
+#: ``kicks`` before): typeA's (``confirm_gaps``, ``confirm_every``, ``confirm_sides``,
+#: ``confirm_breaks``) (:class:`FusionOptions`; :func:`confirm_choice` adds the break source)
+CONFIRM_GAPS = {"jumps": (True, True, True, True), "kicks": (True, True, True, False),
+                "breaks": (True, True, True, True), "all": (True, True, False, False),
                 "on": (True, False, False, False), "off": (False, False, False, False)}
 #: Where ``confirm_breaks`` takes its kick instants (``FusionOptions.break_source``): the
-#: first is the default
-BREAK_SOURCES = ("fit", "image")
+#: first is the default (session 45: the images'; the fit's before)
+BREAK_SOURCES = ("image", "fit")
 #: ``pslog fuse --confirm-gaps``'s choices whose break source is not the default
-CONFIRM_BREAK_SOURCE = {"jumps": "image"}
+CONFIRM_BREAK_SOURCE = {"breaks": "fit"}
+
+
+def confirm_choice(name: str) -> dict:
+    """:class:`FusionOptions`' typeA confirmation fields for ``pslog fuse --confirm-gaps
+    NAME`` (a key of :data:`CONFIRM_GAPS`): ``confirm_gaps``, ``confirm_every``,
+    ``confirm_sides``, ``confirm_breaks`` and ``break_source``."""
+    fields = ("confirm_gaps", "confirm_every", "confirm_sides", "confirm_breaks")
+    return dict(zip(fields, CONFIRM_GAPS[name], strict=True),
+                break_source=CONFIRM_BREAK_SOURCE.get(name, BREAK_SOURCES[0]))
 
 
 @dataclass(frozen=True)
@@ -128,21 +137,23 @@ class FusionOptions:
         side of the kick (session 33)"). False: ``confirm_every``'s test. None (the
         default): on where :func:`for_session` turns ``confirm_every`` on from None, off
         otherwise (``confirm_every=True`` alone: ``--confirm-gaps all`` everywhere)
-    confirm_breaks : bool, typeA, offline only, with ``confirm_sides``: a point whose
-        construction spans a velocity break of ``smooth``'s fit of the session (of
-        ``smooth``'s own input: the detections as its offline gate chooses them; one fit
-        shared with ``smooth`` when both are fused, :class:`pslog.fusion.breaks.SessionFit`;
-        session 44) is replaced by type A's point on the same detection made from the
-        time-reversed observations (the backward pass) when that construction spans no
-        break, and withheld (``break`` in ``Track.dropped``) otherwise; the other points
-        unchanged, to the bit (:mod:`pslog.fusion.breaks`; ``pslog fuse --confirm-gaps breaks``;
-        docs/methods.md, "Type A across a break: the backward pass (session 37)"). Default
-        False
+    confirm_breaks : bool or None, typeA, offline only, with ``confirm_sides``: a point
+        whose construction spans a kick instant (``break_source``'s) is replaced by type A's
+        point on the same detection made from the time-reversed observations (the backward
+        pass) when that construction spans no kick, and withheld (``break`` in
+        ``Track.dropped``) otherwise; the other points unchanged, to the bit
+        (:mod:`pslog.fusion.breaks`; docs/methods.md, "Type A across a break: the backward
+        pass (session 37)"). None (the default): on where :func:`for_session` turns
+        ``confirm_sides`` on (session 45: ``pslog fuse``'s default ``--confirm-gaps jumps``;
+        ``kicks`` before), off otherwise (this module's :func:`fuse`, a stream)
     break_source : str, typeA with ``confirm_breaks``: where the kick instants come from:
-        ``"fit"`` (the default), the velocity breaks of ``smooth``'s fit of the session;
-        ``"image"``, each camera's image track alone (:func:`pslog.fusion.breaks.
-        image_kicks_ns`: the jumps its detections show, no fit; ``pslog fuse --confirm-gaps
-        jumps``; docs/methods.md, "Kick instants from the images (session 44)")
+        ``"image"`` (the default, session 45), each camera's image track alone
+        (:func:`pslog.fusion.breaks.image_kicks_ns`: the jumps its detections show, no fit;
+        ``pslog fuse --confirm-gaps jumps``; docs/methods.md, "Kick instants from the images
+        (session 44)"); ``"fit"``, the velocity breaks of ``smooth``'s fit of the session
+        (of ``smooth``'s own input: the detections as its offline gate chooses them; one
+        fit shared with ``smooth`` when both are fused, :class:`pslog.fusion.breaks.
+        SessionFit`; ``pslog fuse --confirm-gaps breaks``)
     max_std_m : float or None, typeA: a point whose ``std_m`` exceeds this is withheld
         (counted in ``Track.dropped`` as ``uncertain``: the filter's rule;
         ``pslog.fusion.pseudo.MAX_STD_M`` is the filter's default, 5 cm / 1.96, issue 10's
@@ -180,8 +191,8 @@ class FusionOptions:
     confirm_gaps: bool = True
     confirm_every: bool | None = None
     confirm_sides: bool | None = None
-    confirm_breaks: bool = False
-    break_source: str = "fit"
+    confirm_breaks: bool | None = None
+    break_source: str = BREAK_SOURCES[0]
     max_std_m: float | None = None
     detector_offset_m: float | None = None
     detector_bias_px: float | None = None
@@ -206,10 +217,10 @@ class FusionOptions:
         if self.break_source not in BREAK_SOURCES:
             raise FusionError(f"typeA's break source must be one of {', '.join(BREAK_SOURCES)}, "
                               f"got {self.break_source!r}")
-        if self.break_source != BREAK_SOURCES[0] and not self.confirm_breaks:
+        if self.break_source != BREAK_SOURCES[0] and self.confirm_breaks is False:
             raise FusionError(f"typeA's break source {self.break_source!r} needs "
                               "confirm_breaks (it is where that rule takes its kick "
-                              "instants: pslog fuse --confirm-gaps jumps)")
+                              "instants: pslog fuse --confirm-gaps breaks)")
         if self.confirm_every and not self.confirm_gaps:
             raise FusionError("typeA's confirm_every needs confirm_gaps (it confirms every "
                               "point as confirm_gaps confirms the long-gap ones)")
@@ -255,19 +266,25 @@ def detector_bias_for(metadata) -> float:
 
 
 def offline_confirmation(options: FusionOptions) -> FusionOptions:
-    """``options`` with typeA's offline confirmation where ``confirm_every`` and
-    ``confirm_sides`` are None: every point confirmed on each camera's side of a kick, with
-    ``confirm_gaps`` (session 35: the points just after an unseen kick; a stream cannot wait
-    for it), as ``pslog fuse`` runs it; an explicit choice kept (``confirm_every`` given
-    alone: its own test, ``confirm_sides`` off, as in :func:`fuse` and before session 35)."""
-    if options.confirm_every is not None and options.confirm_sides is not None:
-        return options
+    """``options`` with typeA's offline confirmation where ``confirm_every``,
+    ``confirm_sides`` and ``confirm_breaks`` are None: every point confirmed on each
+    camera's side of a kick, with ``confirm_gaps`` (session 35: the points just after an
+    unseen kick; a stream cannot wait for it), and the points spanning a kick instant its
+    images show replaced by the backward pass's (``confirm_breaks``, session 45), as
+    ``pslog fuse`` runs it; an explicit choice kept (``confirm_every`` given alone: its own
+    test, ``confirm_sides`` off, as in :func:`fuse` and before session 35;
+    ``confirm_breaks`` None follows ``confirm_sides``)."""
     if options.confirm_every is None:
         every = options.confirm_gaps
         sides = every if options.confirm_sides is None else options.confirm_sides
     else:
-        every, sides = options.confirm_every, bool(options.confirm_sides)
-    return replace(options, confirm_every=every, confirm_sides=sides)
+        every = options.confirm_every
+        sides = bool(options.confirm_sides) if options.confirm_sides is not None else False
+    breaks = bool(sides) if options.confirm_breaks is None else options.confirm_breaks
+    if (every, sides, breaks) == (options.confirm_every, options.confirm_sides,
+                                  options.confirm_breaks):
+        return options
+    return replace(options, confirm_every=every, confirm_sides=sides, confirm_breaks=breaks)
 
 
 def for_session(options: FusionOptions, metadata, rig: Rig | None = None,
@@ -710,7 +727,7 @@ def fuse(
 
         rays = rays_only(prep)[0]
         forward = _type_a(rays, rig, replace(resolved, confirm_breaks=False,
-                                             break_source="fit"))
+                                             break_source=BREAK_SOURCES[0]))
         function = partial(_type_a, breaks_ns=image_kicks_ns(rays, forward, rig, resolved))
     track = function(prep, rig, resolved)
     if options.clock_covariance is not None and not METHODS[method].own_clock_consider:
@@ -841,7 +858,7 @@ def type_a_explained(prep: Prepared, rig: Rig, options: FusionOptions
 __all__ = [
     "DETECTOR_OFFSET_M", "METHODS", "FusionOptions", "Method", "Prepared", "PseudoStereoPoints",
     "TypeAConstruction", "causal_methods", "check_method", "check_tolerance",
-    "default_methods", "default_tolerance",
+    "confirm_choice", "default_methods", "default_tolerance",
     "detector_bias_for", "explain_type_a", "for_session", "fuse", "fuse_all",
     "offline_confirmation", "prepare", "pseudo_stereo_points", "type_a_prepared",
 ]

@@ -32,6 +32,7 @@ import numpy as np
 
 from ..records import NS, Observations, Track, matching_rows, point_keys
 from ..rig import Rig
+from . import BREAK_SOURCES
 from ._prepare import Prepared, prepare
 
 
@@ -356,7 +357,8 @@ def across_breaks(prep: Prepared, track: Track, rig: Rig, options,
     # (the backward points on the spanning points' detections alone, each the bits it has
     # in the whole backward track: the confirmation's tests are elementwise; 0.2 of type
     # A's 1.4 CPU s at 90 minutes, session 45)
-    back = type_a(rprep, rig, replace(options, confirm_breaks=False, break_source="fit"),
+    back = type_a(rprep, rig, replace(options, confirm_breaks=False,
+                                      break_source=BREAK_SOURCES[0]),
                   wanted=point_keys(t0 - t[spanning], track.camera[spanning]))
     tb = t0 - back.time_ns  # each backward point's time, forward
     # the backward point on each forward point's detection (its time and camera)

@@ -440,7 +440,7 @@ class LiveFuser:
                  options=None, candidates: bool = True, epoch_ns: int | None = None,
                  silent_after_s: float = 1.0, clock=time.time_ns, keep: bool = True,
                  hold_s: float = 0.0, future_s: float = 5.0, monotonic=None) -> None:
-        from ..fusion import FusionOptions, check_method, default_tolerance
+        from ..fusion import BREAK_SOURCES, FusionOptions, check_method, default_tolerance
         from ..fusion._prepare import default_max_gap_s
         from ..fusion.gating import _clock_model, _true_time_ns
         from ..fusion.stream import StreamFuser
@@ -466,7 +466,7 @@ class LiveFuser:
         self.options = replace(options or FusionOptions(tolerance_s=default_tolerance(rig)),
                                confirm_gaps=False,
                                confirm_every=False, confirm_sides=False,
-                               confirm_breaks=False, break_source="fit",
+                               confirm_breaks=False, break_source=BREAK_SOURCES[0],
                                filter_hold_nis=None)
         # without gating a frame's candidates cannot be told apart: its best one alone, as
         # fuse() does with gating off
