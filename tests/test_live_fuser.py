@@ -648,8 +648,10 @@ def test_recorded_session_refused_offline_gives_the_live_points(tmp_path, method
     c = summary.counters
     assert c["duplicate"] > 0 and c["reordered"] == 1 and c["late"] == 1
     assert len(points) == c["points"] > 50
-    # (live emits each filter point at its detection: no hold for the next camera)
-    hold = ["--filter-hold", "off"] if method == "filter" else []
+    # (live emits each filter point at its detection: no hold for the next camera; and
+    # each type A point at once: no confirmation, no point from the detections after it)
+    hold = (["--filter-hold", "off"] if method == "filter" else
+            ["--confirm-gaps", "off"] if method == "typeA" else [])
     assert main(["fuse", str(path), "--method", method, *hold, "-o", str(fused)]) == 0
     offline = read_session(fused).tracks[method]
     np.testing.assert_array_equal([p.t_capture_ns - epoch for p in points], offline.time_ns)

@@ -8,6 +8,8 @@ observations) is 12 mm off; with the option it replaces the forward point."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from _rally import dirty_rally, rally
@@ -21,8 +23,9 @@ from pslog.fusion.breaks import spans_break
 from pslog.fusion.stream import StreamFuser
 from pslog.records import Observations
 
-KICKS = FusionOptions(confirm_every=True, confirm_sides=True)
-BREAKS = FusionOptions(confirm_every=True, confirm_sides=True, confirm_breaks=True)
+KICKS = FusionOptions(confirm_every=True, confirm_sides=True, confirm_breaks=False)
+BREAKS = FusionOptions(confirm_every=True, confirm_sides=True, confirm_breaks=True,
+                        break_source="fit")
 
 
 def _session(seed: int = 46000):
@@ -173,10 +176,14 @@ def test_pslog_fuse_confirm_gaps_breaks_and_eval_lists_the_withheld(tmp_path, cl
     code, stdout, err = cli("eval", out)
     assert code == 0, err
     assert "break" in stdout
-    # the default stays the kick test alone
+    # the default (session 45) takes the images' kick instants: jumps
     default = tmp_path / "default.mcap"
     assert cli("fuse", path, "--method", "typeA", "-o", default)[0] == 0
     assert_array_equal(read_session(default).tracks["typeA"].time_ns,
+                       fuse(det, rig, "typeA", replace(BREAKS, break_source="image")).time_ns)
+    kicks = tmp_path / "kicks.mcap"
+    assert cli("fuse", path, "--method", "typeA", "--confirm-gaps", "kicks", "-o", kicks)[0] == 0
+    assert_array_equal(read_session(kicks).tracks["typeA"].time_ns,
                        fuse(det, rig, "typeA", KICKS).time_ns)
 
 

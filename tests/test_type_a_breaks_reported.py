@@ -58,9 +58,11 @@ def test_fuse_eval_and_view_count_the_points_from_the_detections_after_them(tmp_
     assert (f"{n} typeA points made from the detections after them (--confirm-gaps breaks or "
             f"jumps: span_s < 0, as pslog eval counts them) have none.") in _legend(rrd)
 
-    # the default (kicks) replaces nothing, and none of them says so
+    # the kick test alone (the default before session 45) replaces nothing, and none of
+    # them says so
     default = tmp_path / "kicks.mcap"
-    code, out, err = cli("fuse", session, "--method", "typeA", "-o", default)
+    code, out, err = cli("fuse", session, "--method", "typeA", "--confirm-gaps", "kicks",
+                         "-o", default)
     assert code == 0, err
     assert "made from the detections after" not in out
     assert not np.any(read_session(default).tracks["typeA"].quality["span_s"] < 0)
@@ -159,7 +161,7 @@ def test_a_break_without_a_backward_point_is_explained(tmp_path, cli):
         gone = [(t, c) for t, c in zip(track.time_ns.tolist(), track.camera.tolist(),
                                        strict=True) if (t, c) not in kept]
         rprep, t0 = breaks.reversed_prepared(prep, rig)
-        back = type_a(rprep, rig, replace(options, confirm_breaks=False))
+        back = type_a(rprep, rig, replace(options, confirm_breaks=False, break_source="image"))
         seen.extend(bool(np.any((t0 - back.time_ns == t) & (back.camera == c)))
                     for t, c in gone)
         return out
@@ -167,7 +169,7 @@ def test_a_break_without_a_backward_point_is_explained(tmp_path, cli):
     breaks.across_breaks = spy
     try:
         pslog.fuse(read_session(synced), "typeA", options=FusionOptions(
-            confirm_every=True, confirm_sides=True, confirm_breaks=True),
+            confirm_every=True, confirm_sides=True, confirm_breaks=True, break_source="fit"),
             clock_uncertainty=False)
     finally:
         breaks.across_breaks = across

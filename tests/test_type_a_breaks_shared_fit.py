@@ -26,7 +26,8 @@ from pslog.rig import builtin_rig
 from pslog.simulation import SimulationOptions, simulate_labelled
 from pslog.timing import ClockCovariance
 
-BREAKS = FusionOptions(confirm_every=True, confirm_sides=True, confirm_breaks=True)
+BREAKS = FusionOptions(confirm_every=True, confirm_sides=True, confirm_breaks=True,
+                        break_source="fit")
 
 
 @pytest.fixture(scope="module")
@@ -72,8 +73,8 @@ def test_the_case_is_live(session, alone):
     rig, detections = session
     type_a, _ = alone
     assert np.count_nonzero(type_a.quality["span_s"] < 0) >= 5
-    kicks = fuse_detections(detections, rig, ["typeA"], replace(BREAKS, confirm_breaks=False)
-                            )[0]["typeA"]
+    kicks = fuse_detections(detections, rig, ["typeA"], replace(
+        BREAKS, confirm_breaks=False, break_source="image"))[0]["typeA"]
     assert len(kicks) != len(type_a) or not np.array_equal(kicks.position_world,
                                                           type_a.position_world)
     from pslog.fusion.gating import gate_for

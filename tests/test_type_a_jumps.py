@@ -80,7 +80,7 @@ def _instants(rig, motion, duration, noise_px=0.0, seed=0):
     obs = det.best()
     options = replace(JUMPS, max_gap_s=default_max_gap_s(rig))
     prep = rays_only(prepare(obs, rig))[0]
-    forward = _type_a(prep, rig, replace(options, confirm_breaks=False, break_source="fit"))
+    forward = _type_a(prep, rig, replace(options, confirm_breaks=False, break_source="image"))
     return image_kicks_ns(prep, forward, rig, options), det
 
 
@@ -147,11 +147,13 @@ def test_the_far_point_after_a_kick_is_replaced_without_a_fit(monkeypatch):
 
 
 def test_break_source_is_checked():
-    with pytest.raises(FusionError, match="break source must be one of fit, image, got 'x'"):
+    with pytest.raises(FusionError, match="break source must be one of image, fit, got 'x'"):
         FusionOptions(break_source="x")
-    # (an image source alone would change nothing: said, not ignored)
-    with pytest.raises(FusionError, match="break source 'image' needs confirm_breaks"):
-        FusionOptions(break_source="image")
+    # (the fit's source with the rule off would change nothing: said, not ignored; with
+    # the rule left to the session's defaults, None, it is where the rule takes its instants)
+    with pytest.raises(FusionError, match="break source 'fit' needs confirm_breaks"):
+        FusionOptions(break_source="fit", confirm_breaks=False)
+    assert FusionOptions(break_source="fit").confirm_breaks is None
 
 
 def test_pslog_fuse_confirm_gaps_jumps(tmp_path):

@@ -435,7 +435,8 @@ def load_view_data(session_paths: str | Path | Sequence[str | Path], *,
         # kept: the file does not say which --confirm-gaps left the others out)
         every = type_a_explained(prep, session.rig, replace(
             for_session(FusionOptions(), session.metadata, session.rig),
-            confirm_gaps=False, confirm_every=False, confirm_sides=False))[1]
+            confirm_gaps=False, confirm_every=False, confirm_sides=False,
+            confirm_breaks=False))[1]
         stored = shown["typeA"]
         rows = every.event_row
         # (a point made from the detections after it, --confirm-gaps breaks: span_s < 0,
@@ -529,9 +530,14 @@ def _type_a_with_construction(session: Session
     track, construction = type_a_explained(prep, rig, options)
     if options.clock_covariance is not None and len(track):
         # (as pslog fuse: the synced clocks' uncertainty in the covariance; points unchanged)
+        from pslog.fusion import type_a_with_kicks_of
         from pslog.fusion._prepare import default_max_gap_s
         from pslog.fusion.clock import with_clock_covariance
 
-        track = with_clock_covariance(track, "typeA", prep, rig, replace(
-            options, max_gap_s=options.max_gap_s or default_max_gap_s(rig)))
+        resolved = replace(options, max_gap_s=options.max_gap_s or default_max_gap_s(rig))
+        # (the images' kick instants taken once, as pslog fuse takes them)
+        track = with_clock_covariance(
+            track, "typeA", prep, rig, resolved,
+            type_a_with_kicks_of(prep, rig, resolved)
+            if resolved.confirm_breaks and resolved.break_source == "image" else None)
     return track, construction, obs, gated.rejections

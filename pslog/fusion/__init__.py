@@ -424,16 +424,24 @@ def _type_a(prep: Prepared, rig: Rig, options: FusionOptions, *,
                                             table[0] if table and track is made else None),
                                options.max_std_m)[0]
     if options.confirm_breaks:
-        from .breaks import across_breaks, image_kicks_ns
-
         del made, table  # (the kernel's own track and quality table: the backward pass's
         # is made next, and a 90-minute match's are 150 MB)
-
-        if options.break_source == "image" and breaks_ns is None:
-            # (the forward track's points give the depths)
-            breaks_ns = image_kicks_ns(prep, track, rig, options)
-        track = across_breaks(prep, track, rig, options, _type_a, breaks_ns)
+        track = _across_kicks(prep, track, rig, options, breaks_ns)
     return track
+
+
+def _across_kicks(prep: Prepared, track: Track, rig: Rig, options: FusionOptions,
+                  breaks_ns: np.ndarray | Callable[[], np.ndarray] | None = None) -> Track:
+    """Type A's ``track`` from ``prep`` (rays only) under ``confirm_breaks``: each point
+    spanning a kick instant replaced by the backward pass's or withheld
+    (:func:`pslog.fusion.breaks.across_breaks`); the instants ``breaks_ns``, or the images'
+    (``break_source="image"``: :func:`pslog.fusion.breaks.image_kicks_ns`, the track's
+    points giving the depths), or the fit of ``prep``."""
+    from .breaks import across_breaks, image_kicks_ns
+
+    if options.break_source == "image" and breaks_ns is None:
+        breaks_ns = image_kicks_ns(prep, track, rig, options)
+    return across_breaks(prep, track, rig, options, _type_a, breaks_ns)
 
 
 def _type_a_stream(rig: Rig, options: FusionOptions):
@@ -720,21 +728,28 @@ def fuse(
             breaks = fit.take_breaks()
         function = partial(_type_a, breaks_ns=breaks)
     elif (method == "typeA" and resolved.confirm_breaks and options.clock_covariance is not None):
-        # the image's kick instants, a decision taken as it was in the clocks' perturbed runs
-        # too (as the fit's breaks above)
-        from ._prepare import rays_only
-        from .breaks import image_kicks_ns
-
-        rays = rays_only(prep)[0]
-        forward = _type_a(rays, rig, replace(resolved, confirm_breaks=False,
-                                             break_source=BREAK_SOURCES[0]))
-        function = partial(_type_a, breaks_ns=image_kicks_ns(rays, forward, rig, resolved))
+        function = type_a_with_kicks_of(prep, rig, resolved)
     track = function(prep, rig, resolved)
     if options.clock_covariance is not None and not METHODS[method].own_clock_consider:
         from .clock import with_clock_covariance
 
         track = with_clock_covariance(track, method, prep, rig, resolved, function)
     return track
+
+
+def type_a_with_kicks_of(prep: Prepared, rig: Rig, options: FusionOptions
+                         ) -> Callable[[Prepared, Rig, FusionOptions], Track]:
+    """Type A under ``confirm_breaks`` with the images' kick instants of ``prep`` taken once
+    (``options``: ``max_gap_s`` resolved): the method as the clocks' perturbed runs take it
+    (:func:`pslog.fusion.clock.with_clock_covariance`'s ``function``; the instants are a
+    decision, taken as it was in those runs, as :func:`fuse` takes the fit's breaks)."""
+    from ._prepare import rays_only
+    from .breaks import image_kicks_ns
+
+    rays = rays_only(prep)[0]
+    forward = _type_a(rays, rig, replace(options, confirm_breaks=False,
+                                         break_source=BREAK_SOURCES[0]))
+    return partial(_type_a, breaks_ns=image_kicks_ns(rays, forward, rig, options))
 
 
 def _smooth_fit_of(observations: Observations | Detections, prep: Prepared, rig: Rig,
@@ -823,9 +838,13 @@ def type_a_prepared(detections: Detections, rig: Rig, options: FusionOptions | N
 def type_a_explained(prep: Prepared, rig: Rig, options: FusionOptions
                      ) -> tuple[Track, TypeAConstruction]:
     """``typeA``'s track as :func:`fuse` makes it from ``prep`` (the long-gap confirmation
-    of :mod:`pslog.fusion.confirm` included when ``options.confirm_gaps``) and the
+    of :mod:`pslog.fusion.confirm` included when ``options.confirm_gaps``, and the points
+    spanning a kick replaced by the backward pass's with ``options.confirm_breaks``) and the
     construction of each of its points (the points the confirmation drops, and those
-    withheld as ``uncertain``, left out too)."""
+    withheld as ``uncertain`` or ``break``, left out too; a point made from the detections
+    after it, ``span_s`` < 0, has none: the construction is of the others). With the
+    ``"fit"`` break source the instants are the fit of ``prep`` (:func:`fuse` takes
+    ``smooth``'s own input's)."""
     from ._prepare import rays_only
     from .pseudo import covariance_noise_px, type_a_noise, withhold_uncertain
 
@@ -846,12 +865,16 @@ def type_a_explained(prep: Prepared, rig: Rig, options: FusionOptions
                                                  sides=bool(options.confirm_sides)),
                              max_gap_s, options.noise_px)
     confirmed = withhold_uncertain(confirmed, options.max_std_m)[0]
-    if len(confirmed) == len(track):
+    forward: np.ndarray | slice = slice(None)
+    if options.confirm_breaks:
+        confirmed = _across_kicks(prep, confirmed, rig, replace(options, max_gap_s=max_gap_s))
+        forward = ~(confirmed.quality["span_s"] < 0)
+    elif len(confirmed) == len(track):
         return confirmed, construction
     # the construction's rows are the track's points, in order; the confirmation only drops
     # (a point: its time and camera, keyed as one int64)
     kept = np.isin(point_keys(track.time_ns, track.camera),
-                   point_keys(confirmed.time_ns, confirmed.camera))
+                   point_keys(confirmed.time_ns[forward], confirmed.camera[forward]))
     return confirmed, construction.select(kept)
 
 
@@ -861,4 +884,5 @@ __all__ = [
     "confirm_choice", "default_methods", "default_tolerance",
     "detector_bias_for", "explain_type_a", "for_session", "fuse", "fuse_all",
     "offline_confirmation", "prepare", "pseudo_stereo_points", "type_a_prepared",
+    "type_a_with_kicks_of",
 ]
