@@ -118,7 +118,8 @@ def test_c3d_of_times_on_no_grid_resamples_every_frame(tmp_path):
     labels, frames = _c3d_frames(path)
     frame_ns = first + np.round(np.arange(n_frames) * (1e9 / rate)).astype(np.int64)
     bridge = max(2e9 / rate, 1.5e9 / 30)  # 1.5 frame periods of the 30 fps cameras
-    assert bridge > 2e9 / rate * 3
+    assert bridge > 2e9 / rate * 2  # (the grid: 138 Hz with --confirm-gaps kicks, 116 Hz
+    # with the default jumps since session 45; either way the bridge spans more)
     for j, method in enumerate(labels[:-1]):
         track = session.tracks[method]
         t, index = np.unique(track.time_ns, return_index=True)

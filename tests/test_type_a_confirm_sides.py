@@ -8,6 +8,8 @@ the side test leaves it out."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from _rally import dirty_rally
@@ -21,7 +23,7 @@ from pslog.rig import apply_timing, builtin_rig
 from pslog.simulation import SimulationOptions, simulate
 
 EVERY = FusionOptions(confirm_every=True)
-SIDES = FusionOptions(confirm_every=True, confirm_sides=True)
+SIDES = FusionOptions(confirm_every=True, confirm_sides=True, confirm_breaks=False)
 
 
 def _session(seed: int = 37001):
@@ -90,9 +92,11 @@ def test_a_stream_refuses_it_and_it_needs_confirm_every():
     assert not (options.confirm_gaps or options.confirm_every or options.confirm_sides)
 
 
-def test_kicks_is_the_offline_default_and_on_the_causal_form(tmp_path, cli):
+def test_jumps_is_the_offline_default_and_on_the_causal_form(tmp_path, cli):
     """``pslog fuse`` and :func:`pslog.fuse` confirm every point on its side of a kick by
-    default (session 35: ``for_session`` turns ``confirm_every`` and ``confirm_sides`` on);
+    default (session 35: ``for_session`` turns ``confirm_every`` and ``confirm_sides`` on),
+    and replace the points spanning a kick the images show (session 45: and
+    ``confirm_breaks``, its source the images'; ``--confirm-gaps kicks`` the side test alone);
     ``--confirm-gaps on`` is the causal form, bare :func:`pslog.fusion.fuse`'s default."""
     import pslog
     from pslog.fusion import for_session
@@ -103,9 +107,11 @@ def test_kicks_is_the_offline_default_and_on_the_causal_form(tmp_path, cli):
     with SessionWriter(path, rig, timing="typeA", source="test") as writer:
         writer.add_detections(det)
     sides = fuse(det, rig, "typeA", SIDES)
+    jumps = fuse(det, rig, "typeA", replace(SIDES, confirm_breaks=True))
     causal = fuse(det, rig, "typeA")
     assert len(sides) < len(causal)
-    for args, expected in (((), sides), (("--confirm-gaps", "kicks"), sides),
+    assert np.any(jumps.quality["span_s"] < 0)  # (the default differs from kicks here)
+    for args, expected in (((), jumps), (("--confirm-gaps", "kicks"), sides),
                            (("--confirm-gaps", "on"), causal)):
         out = tmp_path / f"fused{len(args)}{args[-1] if args else ''}.mcap"
         code, stdout, err = cli("fuse", path, "--method", "typeA", *args, "-o", out)
@@ -115,16 +121,21 @@ def test_kicks_is_the_offline_default_and_on_the_causal_form(tmp_path, cli):
         assert_array_equal(track.position_world, expected.position_world)
         assert "ignored" not in stdout
     api = pslog.fuse(path, methods=["typeA"])["typeA"]
-    assert_array_equal(api.time_ns, sides.time_ns)
+    assert_array_equal(api.position_world, jumps.position_world)
     bare = pslog.fuse(det, methods=["typeA"], rig=rig)["typeA"]  # (bare detections: as well)
-    assert_array_equal(bare.time_ns, sides.time_ns)
+    assert_array_equal(bare.position_world, jumps.position_world)
     # the session's default: on with confirm_gaps, an explicit choice kept
     options = for_session(FusionOptions(), {})
-    assert options.confirm_every and options.confirm_sides
+    assert options.confirm_every and options.confirm_sides and options.confirm_breaks
+    assert options.break_source == "image"
     options = for_session(FusionOptions(confirm_gaps=False), {})
     assert options.confirm_every is False and options.confirm_sides is False
+    assert options.confirm_breaks is False
     options = for_session(FusionOptions(confirm_every=True, confirm_sides=False), {})
     assert options.confirm_every and options.confirm_sides is False
+    assert options.confirm_breaks is False
+    options = for_session(FusionOptions(confirm_breaks=False), {})
+    assert options.confirm_sides and options.confirm_breaks is False
     # named for a run without typeA: said
     code, stdout, err = cli("fuse", path, "--method", "nearest", "--confirm-gaps", "kicks",
                             "-o", tmp_path / "nearest.mcap")
