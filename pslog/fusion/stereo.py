@@ -521,18 +521,29 @@ def _window_quartiles(t_fin: np.ndarray, v_fin: np.ndarray, ends_ns: np.ndarray,
     return out / RAYLEIGH_QUARTILE
 
 
-def quadratic_residuals(prep: Prepared, uv: np.ndarray, max_gap_s: float
-                        ) -> tuple[np.ndarray, np.ndarray]:
+def quadratic_residuals(prep: Prepared, uv: np.ndarray, max_gap_s: float,
+                        compiled: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """Each detection's residual from the quadratic through its camera's three previous
     detections (each within ``max_gap_s`` of the next), extrapolated to its time with the
     Lagrange weights ``l`` (:func:`slot_motion`'s, one step on): ``u - Σ l_j u_j`` (n, 2),
     in the pixels of ``uv`` (n, 2), and ``1 + Σ l_j²`` (n,), its variance over the
     detections' σ² per axis under the model; NaN where a detection has no three such
     previous ones. :func:`detection_noise` (recorded pixels) and :func:`innovations`
-    (undistorted) take them."""
+    (undistorted) take them. ``compiled``: each camera's in one pass
+    (:func:`._stereo_kernel.quadratic_residuals_rows`, the same operations: the same bits),
+    else with numpy columns (the reference)."""
     n = len(prep.obs)
     t_obs = prep.obs.time_ns
     out, weight = np.full((n, 2), np.nan), np.full(n, np.nan)
+    if compiled:
+        from . import _stereo_kernel
+
+        t_c, uv_c = _c(t_obs, dtype=np.int64), _c(uv, dtype=np.float64)
+        for rows in prep.per_camera:
+            _stereo_kernel.quadratic_residuals_rows(_c(rows, dtype=np.int64), t_c, uv_c,
+                                                    int(max_gap_s * NS) / NS, float(NS),
+                                                    out, weight)
+        return out, weight
     for rows in prep.per_camera:
         if len(rows) < 4:
             continue
@@ -553,11 +564,13 @@ def quadratic_residuals(prep: Prepared, uv: np.ndarray, max_gap_s: float
     return out, weight
 
 
-def recorded_residuals(prep: Prepared, max_gap_s: float) -> tuple[np.ndarray, np.ndarray]:
+def recorded_residuals(prep: Prepared, max_gap_s: float, compiled: bool = True
+                       ) -> tuple[np.ndarray, np.ndarray]:
     """:func:`quadratic_residuals` in recorded pixels (a detection the rig says is no
     detection — undistorted NaN — has none)."""
     return quadratic_residuals(
-        prep, np.where(np.isfinite(prep.uv_undistorted), prep.obs.uv, np.nan), max_gap_s)
+        prep, np.where(np.isfinite(prep.uv_undistorted), prep.obs.uv, np.nan), max_gap_s,
+        compiled)
 
 
 #: ``nearest``'s test of a break in the image motion (a bounce, a kick): a detection's
@@ -574,7 +587,7 @@ KINK_SHARE = 0.2
 
 
 def innovations(prep: Prepared, max_gap_s: float,
-                recorded: tuple[np.ndarray, np.ndarray] | None = None
+                recorded: tuple[np.ndarray, np.ndarray] | None = None, compiled: bool = True
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(ν², ν_r², c)`` (n,) each: every detection's squared residual from the quadratic
     through its camera's three previous ones in undistorted pixels (its size, where the
@@ -583,9 +596,9 @@ def innovations(prep: Prepared, max_gap_s: float,
     and ``c = 1 + Σ l_j²``, the recorded residual's variance over σ² per axis if the image
     motion has no break (:func:`quadratic_residuals`; NaN: no three such previous
     detections). What :func:`motion_covariance`'s break term takes. ``recorded``:
-    :func:`recorded_residuals`, if already made."""
-    res, weight = quadratic_residuals(prep, prep.uv_undistorted, max_gap_s)
-    rec, _ = recorded_residuals(prep, max_gap_s) if recorded is None else recorded
+    :func:`recorded_residuals`, if already made. ``compiled``: :func:`quadratic_residuals`'."""
+    res, weight = quadratic_residuals(prep, prep.uv_undistorted, max_gap_s, compiled)
+    rec, _ = recorded_residuals(prep, max_gap_s, compiled) if recorded is None else recorded
     return (_c(res[:, 0] * res[:, 0] + res[:, 1] * res[:, 1]),
             _c(rec[:, 0] * rec[:, 0] + rec[:, 1] * rec[:, 1]), _c(weight))
 
@@ -1194,11 +1207,12 @@ def fuse_nearest(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5,
     if noise_px is None:
         points, quality, flags, _ = nview_points(prep, rows, None, compiled=compiled)
     else:
-        recorded = recorded_residuals(prep, max_gap_s)
+        recorded = recorded_residuals(prep, max_gap_s, compiled)
         sigma = detection_noise(prep, time_ns, max_gap_s, noise_px)
         points, quality, flags, _ = nview_points(
             prep, rows, sigma, slot_motion(prep, rows, time_ns, max_gap_s, compiled),
-            compiled, innovations(prep, max_gap_s, recorded), excess=(time_ns, max_gap_s))
+            compiled, innovations(prep, max_gap_s, recorded, compiled),
+            excess=(time_ns, max_gap_s))
     kept = _NearestRows(len(rows))
     kept.add(time_ns, camera, others, points, quality, flags, drops)
     return kept.track()
