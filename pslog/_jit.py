@@ -211,6 +211,98 @@ def _lazy_blas_probe(numba_cpu: Any) -> None:
     context.load_additional_registries = load_additional_registries
 
 
+#: scipy's Cython BLAS and LAPACK modules, whose functions numba's compiled ``np.linalg``
+#: calls (:func:`cython_linalg_by_file`)
+_CYTHON_LINALG = ("cython_blas", "cython_lapack")
+
+
+class _LinalgLoader:
+    """``scipy.linalg``'s own loader, that also gives the module, once run, the Cython
+    modules :func:`cython_linalg_by_file` loaded before it as its attributes (as their
+    import as submodules would have: ``import scipy.linalg.cython_lapack`` then
+    ``scipy.linalg.cython_lapack.x``); anything else is the loader's."""
+
+    def __init__(self, loader: Any) -> None:
+        self._loader = loader
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._loader, name)
+
+    def create_module(self, spec: Any) -> Any:
+        return self._loader.create_module(spec)
+
+    def exec_module(self, module: Any) -> None:
+        import sys
+
+        self._loader.exec_module(module)
+        for name in _CYTHON_LINALG:
+            sub = sys.modules.get(f"scipy.linalg.{name}")
+            if sub is not None and not hasattr(module, name):
+                setattr(module, name, sub)
+
+
+class _LinalgFinder:
+    """A meta-path finder of ``scipy.linalg`` alone (the path's spec, with
+    :class:`_LinalgLoader`), once :func:`cython_linalg_by_file` loaded its Cython modules:
+    put at the front of ``sys.meta_path`` then and left there (as :class:`_BeforeArraymath`)."""
+
+    def find_spec(self, name: str, path: Any = None, target: Any = None) -> Any:
+        if name != "scipy.linalg":
+            return None
+        import importlib.machinery
+
+        spec = importlib.machinery.PathFinder.find_spec(name, path, target)
+        if spec is not None and spec.loader is not None:
+            spec.loader = cast(Any, _LinalgLoader(spec.loader))
+        return spec
+
+
+_LINALG_FINDER = _LinalgFinder()
+
+
+def cython_linalg_by_file() -> None:
+    """Load scipy's ``scipy.linalg.cython_blas`` and ``cython_lapack`` extension modules by
+    their files, under their names, without importing :mod:`scipy.linalg`.
+
+    numba's compiled ``np.linalg`` calls scipy's Cython LAPACK (and ``np.dot`` its BLAS):
+    at a function's first call numba's helper library imports ``scipy.linalg.cython_lapack``
+    for its pointer, and that import runs ``scipy.linalg``'s ``__init__`` first (its
+    decompositions, scipy's array-API layer, the docstrings it parses: ~0.15-0.2 CPU s, in
+    a default ``pslog fuse`` the filter's first window fit) for a module that needs none of
+    it. Found in ``sys.modules``, the module is taken as it is (the same extension module:
+    CPython loads an extension once per process). A ``scipy.linalg`` imported later gets
+    them as attributes (:class:`_LinalgFinder`). Nothing is done where ``scipy.linalg`` is
+    imported already, or a module is not found (numba's import then does as before)."""
+    import sys
+
+    if "scipy.linalg" in sys.modules or all(f"scipy.linalg.{n}" in sys.modules
+                                            for n in _CYTHON_LINALG):
+        return
+    import importlib.machinery
+
+    try:
+        import scipy
+
+        folders = [os.path.join(path, "linalg") for path in getattr(scipy, "__path__", [])]
+        specs = [importlib.machinery.PathFinder.find_spec(n, folders) for n in _CYTHON_LINALG]
+        if any(s is None or not s.origin for s in specs):
+            return
+        if _LINALG_FINDER not in sys.meta_path:
+            sys.meta_path.insert(0, _LINALG_FINDER)  # type: ignore[arg-type]
+        for name, found in zip(_CYTHON_LINALG, specs, strict=True):
+            full = f"scipy.linalg.{name}"
+            if full in sys.modules:
+                continue
+            spec = importlib.util.spec_from_file_location(full, cast(Any, found).origin)
+            if spec is None or spec.loader is None:
+                return
+            module = importlib.util.module_from_spec(spec)
+            spec.loader.exec_module(module)
+            sys.modules.setdefault(full, module)
+    except Exception:  # (numba's own import at the call reports a fault)
+        return
+
+
 #: the packages outside numba and llvmlite that a first ``import numba`` (and its CPU
 #: target's first refresh) imports: :func:`settle_imports` imports them on the calling
 #: thread before pslog starts a thread that imports numba (tests/test_jit_threads.py checks

@@ -213,3 +213,36 @@ def test_nearest_rows_and_motion_by_hand():
                     strict=True):
         for x, y in zip(a, b, strict=True):
             assert x.tobytes() == y.tobytes()
+
+
+@pytest.mark.parametrize("lens", [None, LENS])
+def test_quadratic_residuals_compiled_equal_numpy_and_by_hand(lens):
+    """:func:`quadratic_residuals` by its compiled pass (``nearest``'s noise and break
+    terms: recorded and undistorted pixels) gives the numpy columns' bits, NaN where they
+    are (no three previous detections within the gap, damaged pixels), and a detection's
+    residual and weight by hand from the Lagrange weights through its camera's three
+    previous detections."""
+    from pslog.fusion.stereo import quadratic_residuals
+
+    prep, rig = _session(lens)
+    gap = default_max_gap_s(rig)
+    recorded = np.where(np.isfinite(prep.uv_undistorted), prep.obs.uv, np.nan)
+    for uv in (prep.uv_undistorted, recorded):
+        with np.errstate(all="ignore"):
+            want = quadratic_residuals(prep, uv, gap, compiled=False)
+        got = quadratic_residuals(prep, uv, gap)
+        assert got[0].tobytes() == want[0].tobytes()
+        assert got[1].tobytes() == want[1].tobytes()
+        assert 0 < np.count_nonzero(np.isnan(got[1])) < len(got[1]) // 2
+    # by hand: camera 0's first detection with three previous ones, each within the gap
+    res, weight = quadratic_residuals(prep, prep.uv_undistorted, gap)
+    rows = prep.per_camera[0]
+    i = next(i for i in range(3, len(rows)) if np.all(np.isfinite(res[rows[i]])))
+    t = prep.obs.time_ns[rows[i - 3:i + 1]] / 1e9  # oldest first
+    u = prep.uv_undistorted[rows[i - 3:i + 1]]
+    # the quadratic through the three previous detections, at the detection's time
+    lagrange = [np.prod([(t[3] - t[k]) / (t[j] - t[k]) for k in range(3) if k != j])
+                for j in range(3)]
+    assert np.allclose(res[rows[i]], u[3] - sum(w * u[j] for j, w in enumerate(lagrange)),
+                       rtol=1e-9, atol=1e-9)
+    assert np.isclose(weight[rows[i]], 1 + sum(w * w for w in lagrange), rtol=1e-12)

@@ -221,6 +221,9 @@ _REFINE_STAGES = (1 / 16, 1 / 4)
 _REFINE_AGAIN = 1 / 32
 #: Rounds of break detection (each finds the jumps the previous fit still hides)
 _BREAK_ROUNDS = 3
+#: two refined breaks this many knot spacings apart or less are tested against one
+#: (:func:`_two_against_one`)
+_CLOSE_SPANS = 2.0
 #: Gauss–Newton iterations of the first loose fit, of the next rounds' (from the previous
 #: fit, refitted to the new knots: the refit is their one iteration since session 23,
 #: :func:`_refit_linearised`), and of the fit under the real prior at which the breaks'
@@ -1012,6 +1015,9 @@ def _fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions,
         terms = _scan_terms(J, w, sigma)
         breaks = _refine_breaks(problem, control, sigma, r, w, J, spacing, breaks, options,
                                 terms=terms)
+        # two close breaks tested against one in their place
+        breaks = _two_against_one(problem, control, sigma, r, w, J, spacing, breaks, options,
+                                  terms=terms)
         # each break kept only where it pays its way under the real prior too
         breaks = _confirmed_breaks(problem, control, sigma, r, w, J, spacing, breaks,
                                    options, terms=terms)
@@ -1828,10 +1834,11 @@ def _pieces_with_breaks(problem: _Problem, t_obs: np.ndarray, breaks: list[np.nd
     row0 = 0
     for p, known in enumerate(breaks):
         n = len(problem.rows_of_piece[p])
+        if len(known) == 0:  # (its rows' order is not needed)
+            row0 += n
+            continue
         here = row0 + np.argsort(t_obs[row0:row0 + n], kind="stable")
         row0 += n
-        if len(known) == 0:
-            continue
         first_ok, last_ok = _end_limits(t_obs[here], cameras[here])
         limits = np.stack([np.r_[-np.inf, known[:-1]], np.r_[known[1:], np.inf]], axis=1)
         yield p, here, known, first_ok, last_ok, limits
@@ -2006,6 +2013,91 @@ def _confirmed_breaks(problem: _Problem, control: np.ndarray, sigma: float, r: n
     return out
 
 
+def _two_against_one(problem: _Problem, control: np.ndarray, sigma: float, r: np.ndarray,
+                     w: np.ndarray, J: np.ndarray, spacing: float, breaks: list[np.ndarray],
+                     options: SmoothOptions, terms: tuple | None = None
+                     ) -> list[np.ndarray]:
+    """The refined ``breaks`` with each two of them less than ``_CLOSE_SPANS`` knot spacings
+    apart tested against one break in their place: the one's best instant searched
+    (:func:`_breaks.scan` on the problem linearised at the fit, over ``[b₁ − h/4, b₂ + h/4]``
+    at least a spacing from the breaks beyond the pair, its window cut at them), then both
+    models' least costs on the same detections with every near break in the model
+    (:func:`_region_costs`, as :func:`_gain_in_context`): the pair stays only where its
+    second break gains more than ``break_threshold`` over the one (σ² units, the likelihood
+    ratio every break must pass). Only where the one lies at neither of the pair's instants
+    (farther than the refine's first stage, ``h/16``, from both): a one at one of them asks
+    whether the other break is needed, which :func:`_confirmed_breaks` decides (held out:
+    ``wide3`` rally-72507 of ``--first-seed 72500``, a weak kick 80 ms after another, its
+    break 17.6 σ² over the one in context; dropped here, a point 44 mm off). Of pairs that
+    share a break or lie side by side, the one whose second break gains least is merged.
+
+    Session 45: a kick between two breaks the fit kept, on neither (``paper3`` rally-78502
+    of ``bench_dirty.py --more --first-seed 78500`` with the faults: kick 5.5820 s, breaks
+    5.5505 and 5.6000, h 37.56 ms; a point 54 mm off): each break alone explained part of
+    the jump, so each passed its test with the other held, and the refine, which moves one
+    break at a time, could not bring either onto the kick."""
+    close_in = [len(b) > 1 and bool(np.any(np.diff(b) <= _CLOSE_SPANS * spacing))
+                for b in breaks]
+    if not any(close_in):  # (nearly every session: no rows formed)
+        return breaks
+    reach = _WINDOW_SPANS * spacing
+    t_obs = problem.t[problem.rows]
+    pairs = []
+    for p, here, known, first_ok, last_ok, _ in _pieces_with_breaks(problem, t_obs, [
+            b if c else b[:0] for b, c in zip(breaks, close_in, strict=True)]):
+        if len(known) < 2:
+            continue
+        close = np.flatnonzero((np.diff(known) <= _CLOSE_SPANS * spacing)
+                               & (known[:-1] >= first_ok) & (known[1:] <= last_ok))
+        if len(close):
+            pairs.append((p, here, known, first_ok, last_ok, close))
+    if not pairs:
+        return breaks
+    X = problem.positions_known(control)
+    target = _linear_target(J, X, r)
+    jobs = []
+    for p, here, known, first_ok, last_ok, close in pairs:
+        b1, b2 = known[close], known[close + 1]
+        b0 = np.where(close > 0, known[np.maximum(close - 1, 0)], -np.inf)
+        b3 = np.where(close + 2 < len(known), known[np.minimum(close + 2, len(known) - 1)],
+                      np.inf)
+        a = np.maximum.reduce([b1 - spacing / 4, b0 + spacing, np.full(len(b1), first_ok)])
+        b = np.minimum.reduce([b2 + spacing / 4, b3 - spacing, np.full(len(b1), last_ok)])
+        jobs.append((p, here, (a + b) / 2, np.stack([a, np.maximum(a, b)], axis=1),
+                     np.stack([b0, b3], axis=1)))
+    results = _scan_pieces(jobs, t_obs, J, target, w / sigma**2, spacing, options,
+                           terms=terms)
+    out = [np.asarray(x, dtype=np.float64) for x in breaks]
+    for (p, here, known, _, _, close), job, (tau, _) in zip(pairs, jobs, results,
+                                                            strict=True):
+        t_here = t_obs[here]
+        second = []  # (what the pair's second break gains over the one, pair, the one)
+        for k, i in enumerate(close):
+            pair = known[i:i + 2]
+            if not job[3][k, 0] < job[3][k, 1] or not np.isfinite(tau[k]) or np.min(
+                    np.abs(pair - tau[k])) <= _REFINE_STAGES[0] * spacing:
+                continue
+            near = known[(known > pair[0] - reach) & (known < pair[1] + reach)]
+            cost = _region_costs(problem, X, r, J, w, sigma, spacing, here, t_here,
+                                 float(near.min()) - reach, float(near.max()) + reach, known,
+                                 [(np.zeros(0), np.zeros(0)), (pair, tau[k:k + 1])])
+            if cost is not None and cost[1] - cost[0] <= options.break_threshold:
+                second.append((cost[1] - cost[0], i, float(tau[k])))
+        used = np.zeros(len(known), dtype=bool)
+        keep = np.ones(len(known), dtype=bool)
+        one = []
+        for _, i, t_one in sorted(second):
+            if used[i] or used[i + 1]:
+                continue
+            # (the pairs beside it searched their one with this pair's breaks as bounds)
+            used[max(i - 1, 0):i + 3] = True
+            keep[i:i + 2] = False
+            one.append(t_one)
+        if one:
+            out[p] = np.sort(np.r_[known[keep], one])
+    return out
+
+
 def _gain_in_context(problem: _Problem, X: np.ndarray, r: np.ndarray, J: np.ndarray,
                      w: np.ndarray, sigma: float, spacing: float, here: np.ndarray,
                      t_here: np.ndarray, known: np.ndarray, tau: float) -> float:
@@ -2026,9 +2118,26 @@ def _gain_in_context(problem: _Problem, X: np.ndarray, r: np.ndarray, J: np.ndar
     (threshold 25); here 620 (the whole session's linearised problem refitted without it:
     620 too). Dropped, the other break moved between the two kicks: points to 238 mm."""
     reach = _WINDOW_SPANS * spacing
-    lo, hi = tau - reach, tau + reach
     near = known[np.abs(known - tau) < reach]
-    lo, hi = min(lo, float(near.min()) - reach), max(hi, float(near.max()) + reach)
+    lo = min(tau - reach, float(near.min()) - reach)
+    hi = max(tau + reach, float(near.max()) + reach)
+    cost = _region_costs(problem, X, r, J, w, sigma, spacing, here, t_here, lo, hi, known,
+                         [(np.zeros(0), np.zeros(0)), (np.array([tau]), np.zeros(0))])
+    if cost is None:  # (undetermined: nothing against the break)
+        return np.inf
+    return cost[1] - cost[0]
+
+
+def _region_costs(problem: _Problem, X: np.ndarray, r: np.ndarray, J: np.ndarray,
+                  w: np.ndarray, sigma: float, spacing: float, here: np.ndarray,
+                  t_here: np.ndarray, lo: float, hi: float, known: np.ndarray,
+                  models: list[tuple[np.ndarray, np.ndarray]]) -> list[float] | None:
+    """The least cost (σ² units) of the problem linearised at the fit (:func:`_gain_in_context`'s
+    ``X``, ``r``, ``J``, ``w``, ``σ``) over the detections of ``here`` (a piece's rows in
+    time order, ``t_here`` their times) within ``[lo, hi]`` s, on uniform knots from its
+    first detection with a triple knot at each break, per model ``(drop, add)`` of
+    ``models``: the breaks of ``known`` (s) inside the region without those of ``drop``,
+    with those of ``add``. None where a model is undetermined (its banded solve failed)."""
     i0 = int(np.searchsorted(t_here, lo, side="left"))
     i1 = int(np.searchsorted(t_here, hi, side="right"))
     sel = here[i0:i1]
@@ -2044,7 +2153,10 @@ def _gain_in_context(problem: _Problem, X: np.ndarray, r: np.ndarray, J: np.ndar
     else:  # (times moved out of the rows' order: the session's observations)
         obs = problem.obs
     cost = []
-    for held in (inside, inside[inside != tau]):
+    for drop, add in models:
+        held = inside[~np.isin(inside, drop)] if len(drop) else inside
+        if len(add):
+            held = np.sort(np.r_[held, add])
         knots = _knots_with_breaks(float(t_sel[0]), float(t_sel[-1]) + 1e-9, spacing, held)
         sub = _Problem(obs, problem.rig, [rows], [knots], problem.prior, problem.t0_ns)
         if not np.array_equal(sub.t[rows], t_sel):
@@ -2054,11 +2166,11 @@ def _gain_in_context(problem: _Problem, X: np.ndarray, r: np.ndarray, J: np.ndar
         ab, rhs = sub.linearised_normal(J[sel], X[sel], r[sel], weight)
         try:
             c = _normal.solve(_normal.factor(ab), rhs).reshape(-1, 3)
-        except FusionError:  # (undetermined: nothing against the break)
-            return np.inf
+        except FusionError:
+            return None
         res = np.einsum("naj,nj->na", J[sel], sub.positions(c)) - target
         cost.append(float(np.sum(weight * np.sum(res**2, axis=1))) + _prior_cost(sub, c))
-    return cost[1] - cost[0]
+    return cost
 
 
 def _one_per_span(tau: np.ndarray, moved: np.ndarray, spacing: float,

@@ -577,3 +577,26 @@ def residual_sums(rows, used, residual, sigma, time_ns, t_obs, uv, before, activ
         d2[p] = sd
         e2[p] = se
         n_used[p] = count
+
+
+@kernel
+def quadratic_residuals_rows(rows, time_ns, uv, gap, ns, out, weight):
+    """:func:`~.stereo.quadratic_residuals` of one camera's detections: for each of its
+    ``rows`` (k,) int64 (row order) from the fourth on, with ``a, b, c`` the intervals
+    (seconds: ``time_ns`` (n,) int64 differences over ``ns``) to its three previous ones,
+    all in ``(0, gap]``: ``u - Σ l_j u_j`` (``uv`` (n, 2)) into ``out[row]`` (n, 2) and
+    ``1 + Σ l_j²`` into ``weight[row]`` (n,), its Lagrange weights' numpy expressions in
+    their order (the same bits); the others' entries unchanged."""
+    for i in range(3, rows.shape[0]):
+        r, r1, r2, r3 = rows[i], rows[i - 1], rows[i - 2], rows[i - 3]
+        a = (time_ns[r] - time_ns[r1]) / ns
+        b = (time_ns[r1] - time_ns[r2]) / ns
+        c = (time_ns[r2] - time_ns[r3]) / ns
+        if not (a > 0 and b > 0 and c > 0 and a <= gap and b <= gap and c <= gap):
+            continue
+        l1 = (a + b) * (a + b + c) / (b * (b + c))
+        l2 = -a * (a + b + c) / (b * c)
+        l3 = a * (a + b) / ((b + c) * c)
+        for x in range(2):
+            out[r, x] = uv[r, x] - (l1 * uv[r1, x] + l2 * uv[r2, x] + l3 * uv[r3, x])
+        weight[r] = 1 + l1 * l1 + l2 * l2 + l3 * l3

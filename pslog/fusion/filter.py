@@ -133,12 +133,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._jit import kernel
+from .._jit import cython_linalg_by_file, kernel
 from ..errors import FusionError
 from ..motion import BALL_RADIUS, MAX_BALL_SPEED_M_S, Ball, G
 from ..records import NS, Observations, Track
 from ..rig import Rig
 from . import FILTER_HOLD_NIS
+
+# (the window fits' LAPACK without scipy.linalg's import: pslog._jit.cython_linalg_by_file)
+cython_linalg_by_file()
 
 #: Quality columns of a ``filter`` track, in order (module docstring).
 FILTER_QUALITY = ("std_m", "std_x_m", "std_y_m", "std_z_m", "innovation_px", "residual_px",

@@ -521,18 +521,29 @@ def _window_quartiles(t_fin: np.ndarray, v_fin: np.ndarray, ends_ns: np.ndarray,
     return out / RAYLEIGH_QUARTILE
 
 
-def quadratic_residuals(prep: Prepared, uv: np.ndarray, max_gap_s: float
-                        ) -> tuple[np.ndarray, np.ndarray]:
+def quadratic_residuals(prep: Prepared, uv: np.ndarray, max_gap_s: float,
+                        compiled: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """Each detection's residual from the quadratic through its camera's three previous
     detections (each within ``max_gap_s`` of the next), extrapolated to its time with the
     Lagrange weights ``l`` (:func:`slot_motion`'s, one step on): ``u - Σ l_j u_j`` (n, 2),
     in the pixels of ``uv`` (n, 2), and ``1 + Σ l_j²`` (n,), its variance over the
     detections' σ² per axis under the model; NaN where a detection has no three such
     previous ones. :func:`detection_noise` (recorded pixels) and :func:`innovations`
-    (undistorted) take them."""
+    (undistorted) take them. ``compiled``: each camera's in one pass
+    (:func:`._stereo_kernel.quadratic_residuals_rows`, the same operations: the same bits),
+    else with numpy columns (the reference)."""
     n = len(prep.obs)
     t_obs = prep.obs.time_ns
     out, weight = np.full((n, 2), np.nan), np.full(n, np.nan)
+    if compiled:
+        from . import _stereo_kernel
+
+        t_c, uv_c = _time_ns_c(prep), _c(uv, dtype=np.float64)
+        for rows in prep.per_camera:
+            _stereo_kernel.quadratic_residuals_rows(_c(rows, dtype=np.int64), t_c, uv_c,
+                                                    int(max_gap_s * NS) / NS, float(NS),
+                                                    out, weight)
+        return out, weight
     for rows in prep.per_camera:
         if len(rows) < 4:
             continue
@@ -553,11 +564,13 @@ def quadratic_residuals(prep: Prepared, uv: np.ndarray, max_gap_s: float
     return out, weight
 
 
-def recorded_residuals(prep: Prepared, max_gap_s: float) -> tuple[np.ndarray, np.ndarray]:
+def recorded_residuals(prep: Prepared, max_gap_s: float, compiled: bool = True
+                       ) -> tuple[np.ndarray, np.ndarray]:
     """:func:`quadratic_residuals` in recorded pixels (a detection the rig says is no
     detection — undistorted NaN — has none)."""
     return quadratic_residuals(
-        prep, np.where(np.isfinite(prep.uv_undistorted), prep.obs.uv, np.nan), max_gap_s)
+        prep, np.where(np.isfinite(prep.uv_undistorted), prep.obs.uv, np.nan), max_gap_s,
+        compiled)
 
 
 #: ``nearest``'s test of a break in the image motion (a bounce, a kick): a detection's
@@ -574,7 +587,7 @@ KINK_SHARE = 0.2
 
 
 def innovations(prep: Prepared, max_gap_s: float,
-                recorded: tuple[np.ndarray, np.ndarray] | None = None
+                recorded: tuple[np.ndarray, np.ndarray] | None = None, compiled: bool = True
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(ν², ν_r², c)`` (n,) each: every detection's squared residual from the quadratic
     through its camera's three previous ones in undistorted pixels (its size, where the
@@ -583,9 +596,9 @@ def innovations(prep: Prepared, max_gap_s: float,
     and ``c = 1 + Σ l_j²``, the recorded residual's variance over σ² per axis if the image
     motion has no break (:func:`quadratic_residuals`; NaN: no three such previous
     detections). What :func:`motion_covariance`'s break term takes. ``recorded``:
-    :func:`recorded_residuals`, if already made."""
-    res, weight = quadratic_residuals(prep, prep.uv_undistorted, max_gap_s)
-    rec, _ = recorded_residuals(prep, max_gap_s) if recorded is None else recorded
+    :func:`recorded_residuals`, if already made. ``compiled``: :func:`quadratic_residuals`'."""
+    res, weight = quadratic_residuals(prep, prep.uv_undistorted, max_gap_s, compiled)
+    rec, _ = recorded_residuals(prep, max_gap_s, compiled) if recorded is None else recorded
     return (_c(res[:, 0] * res[:, 0] + res[:, 1] * res[:, 1]),
             _c(rec[:, 0] * rec[:, 0] + rec[:, 1] * rec[:, 1]), _c(weight))
 
@@ -693,13 +706,11 @@ def _slot_motion_compiled(prep: Prepared, rows: np.ndarray, time_ns: np.ndarray,
     from .innovation import previous_next_rows
 
     k, m = rows.shape
-    obs = prep.obs
     shift, accel = np.empty((m, k, 2)), np.empty((m, k, 2))
     mrows = np.empty((m, k, 3), dtype=np.int64)
     linear, quad, lag = np.empty((m, k, 3)), np.empty((m, k, 3)), np.empty((m, k))
     _stereo_kernel.slot_motion(
-        _c(rows, dtype=np.int64), _c(time_ns, np.int64),
-        _c(obs.time_ns, dtype=np.int64),
+        _c(rows, dtype=np.int64), _c(time_ns, np.int64), _time_ns_c(prep),
         _c(prep.uv_undistorted, dtype=np.float64), previous_next_rows(prep)[0],
         max_gap_ns, max_gap_ns / NS, float(NS),
         shift, accel, mrows, linear, quad, lag)
@@ -713,6 +724,16 @@ def _c(a: np.ndarray, dtype=None) -> np.ndarray:
     as another signature: one signature per kernel, the one ``pslog.warm`` compiles)."""
     a = np.ascontiguousarray(a, dtype=dtype)
     return a if a.flags.writeable else a.copy()
+
+
+def _time_ns_c(prep: Prepared) -> np.ndarray:
+    """``_c(prep.obs.time_ns, dtype=np.int64)``, made once per Prepared (a column read from
+    a file is read-only: copied once, not at each block's kernels: a 90-minute match's
+    3.9 MB twice in each of its 29 blocks of ``nearest``); not to be written."""
+    made = prep.__dict__.get("_time_ns_c")
+    if made is None:
+        made = prep.__dict__["_time_ns_c"] = _c(prep.obs.time_ns, dtype=np.int64)
+    return made
 
 
 def _stacked(parts: list[np.ndarray]) -> np.ndarray:
@@ -1000,7 +1021,7 @@ def _refusal_sums(prep: Prepared, rows: np.ndarray, used: np.ndarray, points: np
             _c(rows, dtype=np.int64), _c(used, dtype=bool),
             _c(np.array(residuals, dtype=np.float64).reshape(m, k)),
             _c(sigma, dtype=np.float64), _c(time_ns, dtype=np.int64),
-            _c(prep.obs.time_ns, dtype=np.int64), _c(prep.uv_undistorted, dtype=np.float64),
+            _time_ns_c(prep), _c(prep.uv_undistorted, dtype=np.float64),
             previous_next_rows(prep)[0], _c(np.asarray(used.any(axis=0))), max_gap_ns / NS,
             float(NS), UNKNOWN_IMAGE_SPEED_PX_S, d2, e2, n)
     else:
@@ -1194,11 +1215,12 @@ def fuse_nearest(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5,
     if noise_px is None:
         points, quality, flags, _ = nview_points(prep, rows, None, compiled=compiled)
     else:
-        recorded = recorded_residuals(prep, max_gap_s)
+        recorded = recorded_residuals(prep, max_gap_s, compiled)
         sigma = detection_noise(prep, time_ns, max_gap_s, noise_px)
         points, quality, flags, _ = nview_points(
             prep, rows, sigma, slot_motion(prep, rows, time_ns, max_gap_s, compiled),
-            compiled, innovations(prep, max_gap_s, recorded), excess=(time_ns, max_gap_s))
+            compiled, innovations(prep, max_gap_s, recorded, compiled),
+            excess=(time_ns, max_gap_s))
     kept = _NearestRows(len(rows))
     kept.add(time_ns, camera, others, points, quality, flags, drops)
     return kept.track()
@@ -1228,8 +1250,10 @@ def excess_factor(prep: Prepared, rows: np.ndarray, used: np.ndarray, points: np
     d2, e2, n = _refusal_sums(prep, rows, used, points, time_ns, sig, max_gap_s, residuals,
                               compiled)
     bound = np.full(k, np.inf)
-    for count in np.unique(n[n >= 2]).tolist():
-        bound[n == count] = np.sqrt(chi2_threshold(2 * count - 3))
+    for count in range(2, m + 1):  # (the rays used: 0 to m; no np.unique's sort a block)
+        at = n == count
+        if at.any():
+            bound[at] = np.sqrt(chi2_threshold(2 * count - 3))
     with np.errstate(invalid="ignore"):
         excess = np.sqrt(d2) - np.sqrt(e2)
         over = (n >= 2) & (np.sqrt(d2) > bound + np.sqrt(e2))
@@ -1348,6 +1372,7 @@ def _nearest_in_blocks(prep: Prepared, rows: np.ndarray, others: np.ndarray,
         del recorded
     n_blocks = k // NEAREST_BLOCK_ROWS
     bounds = [k * i // n_blocks for i in range(n_blocks + 1)]
+    time_c = _time_ns_c(prep)  # (the kernels' times: views of one writable copy)
     kept = _NearestRows(k)
     noted: Drops | None = None if drops is None else []
     for lo, hi in itertools.pairwise(bounds):
@@ -1357,8 +1382,8 @@ def _nearest_in_blocks(prep: Prepared, rows: np.ndarray, others: np.ndarray,
         else:
             points, quality, flags, used = nview_points(
                 prep, block, sigma[lo:hi],
-                _slot_motion_compiled(prep, block, time_ns[lo:hi], max_gap_ns), True, breaks,
-                excess=(time_ns[lo:hi], max_gap_s))
+                _slot_motion_compiled(prep, block, time_c[lo:hi], max_gap_ns), True, breaks,
+                excess=(time_c[lo:hi], max_gap_s))
         finite = finite_rows(points)
         counts = np.count_nonzero(used & finite[:, None], axis=0)
         if not np.all((counts == 0) | (counts >= 2)):
@@ -1384,8 +1409,7 @@ def nearest_rows(prep: Prepared, max_gap_ns: int, compiled: bool = True
         from . import _stereo_kernel
 
         others = np.empty(n, dtype=np.int64)
-        _stereo_kernel.nearest_rows(_c(camera, dtype=np.int64),
-                                    _c(time_ns, dtype=np.int64),
+        _stereo_kernel.nearest_rows(_c(camera, dtype=np.int64), _time_ns_c(prep),
                                     max_gap_ns, rows, others)
         return rows, others
     events = np.arange(n)
