@@ -115,7 +115,9 @@ def run(args: argparse.Namespace) -> int:
                            **({"rejected_detections": rejected[q.method]}
                               if q.method in rejected else {}),
                            **({"backward_points": backward[q.method]}
-                              if q.method in backward else {})}
+                              if q.method in backward else {}),
+                           **({"fused_with": session.fused_with[q.method]}
+                              if q.method in session.fused_with else {})}
                           for r, q in zip(rows, quality, strict=True)]), indent=2,
                          allow_nan=False))
     else:
@@ -135,6 +137,12 @@ def run(args: argparse.Namespace) -> int:
             print(format_accuracy_table([r for r in rows if r is not None]))
         print()
         print(format_quality_table(quality))
+        settings = {m: session.fused_with[m] for m in methods if m in session.fused_with}
+        if settings:  # (recorded since session 45: the default --confirm-gaps changed then)
+            print()
+            print("fused with (the pslog fuse choices recorded with the track):")
+            for m, chosen in settings.items():
+                print(f"{m:<9} " + " ".join(f"--{k} {v}" for k, v in chosen.items()))
         if gated:
             print()
             print("gating (candidates rejected; detections: frames whose every candidate "

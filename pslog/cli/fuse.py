@@ -322,7 +322,9 @@ def run(args: argparse.Namespace) -> int:
                     if n_early:
                         early[method] = n_early
                         track = track.select(track.time_ns >= 0)
-                    w.add_track(track, left_out=dropped, last=True)
+                    w.add_track(track, left_out=dropped, last=True,
+                                fused_with={"confirm-gaps": confirm_name}
+                                if method == "typeA" else None)
                     if options.gating:
                         w.add_rejections(method, rejected)
                     # points kept whose detection the method rejected itself (smooth's fit,

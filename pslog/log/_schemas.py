@@ -44,6 +44,11 @@ TRACK_FIXED_QUALITY = ("ray_miss_m", "snap_px", "ray_shift_m")
 #: under the same name in the session metadata record, as ``{method: {reason: count}}``
 #: (docs/log-format.md, "Left-out points"); readers still read that.
 LEFT_OUT_KEY = "left_out_points"
+#: Track channel metadata key: the ``pslog fuse`` choices that shaped the method's points,
+#: a JSON object of option name (without ``--``) to value, e.g. ``{"confirm-gaps":
+#: "jumps"}`` for ``typeA`` (session 45: the default changed from ``kicks``; a file fused
+#: before has none)
+FUSED_WITH_KEY = "fused_with"
 
 
 # ---- topics ---------------------------------------------------------------------------

@@ -60,6 +60,8 @@ class Session:
         left out as invalid or untrustworthy (``Track.dropped`` as ``pslog fuse`` wrote it:
         in each track channel's metadata, or in an older file's session metadata; empty
         when not recorded)
+    fused_with : method -> {option: value}, the ``pslog fuse`` choices that shaped each
+        track's points (typeA's ``confirm-gaps``: session 45 on; empty when not recorded)
     """
 
     path: Path
@@ -74,6 +76,7 @@ class Session:
     ball_truth: Detections | None = None
     rejections: dict = field(default_factory=dict)
     left_out: dict[str, dict[str, int]] = field(default_factory=dict)
+    fused_with: dict[str, dict[str, str]] = field(default_factory=dict)
 
 
 def _reason_counts(value) -> dict[str, int] | None:
@@ -118,6 +121,24 @@ def left_out_counts(f: _Finished, methods) -> dict[str, dict[str, int]]:
             counts = old[method]
         if counts:
             out[method] = counts
+    return out
+
+
+def fused_with_settings(f: _Finished, methods) -> dict[str, dict[str, str]]:
+    """``{method: {option: value}}`` of the tracks of ``methods`` in ``f`` whose channel
+    metadata records them (:data:`pslog.log._schemas.FUSED_WITH_KEY`); a damaged record is
+    left out (it says nothing the points need)."""
+    out: dict[str, dict[str, str]] = {}
+    for c in f.summary.channels.values():
+        if S.FUSED_WITH_KEY not in c.metadata:
+            continue
+        method = next((m for m in methods if S.track_topic(m) == c.topic), None)
+        try:
+            value = json.loads(c.metadata[S.FUSED_WITH_KEY])
+        except ValueError:
+            continue
+        if method is not None and isinstance(value, dict):
+            out[method] = {str(k): str(v) for k, v in value.items()}
     return out
 
 
@@ -599,7 +620,8 @@ def _read(f: _Finished, skip: frozenset[int] = frozenset()) -> Session:
     return Session(path=f.path, rig=rig, detections=detections, truth=truth, tracks=tracks,
                    timing=f.meta.get("timing", "custom"), metadata=dict(f.meta),
                    events=events, n_images=n_images, ball_truth=ball_truth,
-                   rejections=rejections, left_out=left_out_counts(f, tracks))
+                   rejections=rejections, left_out=left_out_counts(f, tracks),
+                   fused_with=fused_with_settings(f, tracks))
 
 
 def decode_detections(camera_names: Sequence[str], per_camera: Sequence) -> Detections:

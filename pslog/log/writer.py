@@ -767,7 +767,7 @@ class SessionWriter:
 
     @_locked
     def add_track(self, track: Track, *, left_out: Mapping[str, int] | None = None,
-                  last: bool = False) -> None:
+                  last: bool = False, fused_with: Mapping[str, str] | None = None) -> None:
         """A fused track: ``pslog.TrackPoint`` per point on ``/tracks/<method>`` and a
         Foxglove-viewable ``foxglove.SceneUpdate`` sphere per point on its ``/scene`` topic.
 
@@ -776,19 +776,28 @@ class SessionWriter:
         with the first part of a track. ``last``: no more points of this method follow: its
         columnar table is written now, right after its messages, and the writer keeps none
         of its tracks (not at close: ``pslog fuse`` writes each method's track as the
-        method ends, the fusion of the others going on meanwhile)."""
+        method ends, the fusion of the others going on meanwhile). ``fused_with``: the
+        choices that shaped its points (option name: value), in the same metadata
+        (:data:`pslog.log._schemas.FUSED_WITH_KEY`), with the first part too."""
         self._check_open()
         method = track.method
         if not method or "/" in method:
             raise InputError(f"track method must be a non-empty name without '/', got {method!r}")
         if table.track_table(method) in self._tables_written:
             raise InputError(f"track {method!r} was added with last=True already")
-        if left_out is not None:
+        if left_out is not None or fused_with is not None:
             topic = S.track_topic(method)
             if topic in self._channels:
-                raise InputError(f"track {method!r}: left-out counts go with its first part")
-            self.channel_metadata[topic] = {S.LEFT_OUT_KEY: json.dumps(
-                {str(k): int(v) for k, v in dict(left_out).items()}, sort_keys=True)}
+                raise InputError(f"track {method!r}: left-out counts and settings go with "
+                                 "its first part")
+            meta = {}
+            if left_out is not None:
+                meta[S.LEFT_OUT_KEY] = json.dumps(
+                    {str(k): int(v) for k, v in dict(left_out).items()}, sort_keys=True)
+            if fused_with is not None:
+                meta[S.FUSED_WITH_KEY] = json.dumps(
+                    {str(k): str(v) for k, v in dict(fused_with).items()}, sort_keys=True)
+            self.channel_metadata[topic] = meta
         if method not in self._track_methods:
             self._track_methods.append(method)
         color = track_color(method)
