@@ -242,19 +242,31 @@ class _LinalgLoader:
 
 
 class _LinalgFinder:
-    """A meta-path finder of ``scipy.linalg`` alone (the path's spec, with
-    :class:`_LinalgLoader`), once :func:`cython_linalg_by_file` loaded its Cython modules:
-    put at the front of ``sys.meta_path`` then and left there (as :class:`_BeforeArraymath`)."""
+    """A meta-path finder of ``scipy.linalg`` alone, once :func:`cython_linalg_by_file`
+    loaded its Cython modules: the spec of the first finder after it in ``sys.meta_path``
+    that finds the module (the one that would have found it without this one), with
+    :class:`_LinalgLoader`; put at the front of ``sys.meta_path`` then and left there (as
+    :class:`_BeforeArraymath`). Not the path's spec directly: a finder before the path's
+    (a frozen application's archive, an editable install's) finds ``scipy.linalg``
+    elsewhere, and the path's spec there is another module (an empty namespace package
+    where the folder holds only the extension modules)."""
 
     def find_spec(self, name: str, path: Any = None, target: Any = None) -> Any:
         if name != "scipy.linalg":
             return None
-        import importlib.machinery
+        import sys
 
-        spec = importlib.machinery.PathFinder.find_spec(name, path, target)
-        if spec is not None and spec.loader is not None:
-            spec.loader = cast(Any, _LinalgLoader(spec.loader))
-        return spec
+        finders = list(sys.meta_path)
+        later = finders[finders.index(self) + 1:] if self in finders else finders
+        for finder in later:
+            find = getattr(finder, "find_spec", None)
+            spec = None if find is None else find(name, path, target)
+            if spec is None:
+                continue
+            if spec.loader is not None and hasattr(spec.loader, "exec_module"):
+                spec.loader = cast(Any, _LinalgLoader(spec.loader))
+            return spec
+        return None
 
 
 _LINALG_FINDER = _LinalgFinder()

@@ -455,11 +455,11 @@ LEFT_OUT_TEXT = {
     "prediction_failed": "the prediction far from the newest ray (the innovation test)",
     "kink": "typeA: the motion bends between the points it extrapolates (a bounce or kick)",
     "contradicted": "typeA: another camera's detections place the ball elsewhere (--confirm-gaps "
-                    "kicks, the default: that camera's track around it, on its side of a kick "
-                    "the track shows; all, on: the next camera's detection)",
-    "break": "typeA (--confirm-gaps breaks or jumps): its construction spans a velocity "
-             "break of smooth's fit (jumps: a kick the cameras' images show), and type A's "
-             "point from the detections after it spans one too or was not made (its own "
+                    "jumps, the default, and kicks: that camera's track around it, on its side "
+                    "of a kick the track shows; all, on: the next camera's detection)",
+    "break": "typeA (--confirm-gaps jumps, the default, or breaks): its construction spans a "
+             "kick the cameras' images show (breaks: a velocity break of smooth's fit), and "
+             "type A's point from the detections after it spans one too or was not made (its own "
              "tests left it out, or too few detections follow: near the session's end)",
     "unconfirmed": "not confirmed in time (typeA: no next camera's detection; filter: after "
                    "a jump or a surprise, two more updates, one from another camera)",

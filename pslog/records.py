@@ -36,8 +36,8 @@ QUALITY_FIELDS = {
     "gap_s": "largest time span bridged (interpolated, extrapolated or taken as "
              "simultaneous), seconds",
     "span_s": "the point's time minus the earliest capture time it uses, seconds (type A's "
-              "point from the detections after it, --confirm-gaps breaks: minus the latest, "
-              "negative)",
+              "point from the detections after it, --confirm-gaps jumps or breaks: minus the "
+              "latest, negative)",
     "std_m": "position standard deviation, sqrt(trace of the covariance), metres (first order "
              "from the detections' pixel noise and, in a session from pslog sync, the "
              "uncertainty of its clock estimates; not the motion model's error, but "

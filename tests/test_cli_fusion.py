@@ -320,7 +320,8 @@ def test_eval_accounts_for_every_point_the_fuse_wrote(tmp_path, cli):
 
 
 def test_eval_says_what_contradicted_means_under_the_default_kick_test(tmp_path, cli):
-    """`pslog fuse`'s default typeA confirmation (--confirm-gaps kicks, session 35) leaves a
+    """`pslog fuse`'s default typeA confirmation (--confirm-gaps jumps, session 45; kicks,
+    session 35, whose side test it includes) leaves a
     point out as contradicted when another camera's track around it, on its side of a kick,
     shows the ball elsewhere; eval's legend said only the older test's 'the next camera's
     detection contradicts it', which a new user of the default could not match."""
@@ -335,7 +336,8 @@ def test_eval_says_what_contradicted_means_under_the_default_kick_test(tmp_path,
     assert code == 0, err
     legend = [line for line in out.splitlines() if line.startswith("  contradicted: ")]
     assert len(legend) == 1, out
-    assert "kicks, the default" in legend[0] and "kick the track shows" in legend[0], legend
+    assert "jumps, the default, and kicks" in legend[0] and "kick the track shows" in legend[0], \
+        legend
 
 
 def test_eval_help_text_names_not_scored(capsys):

@@ -178,3 +178,43 @@ def test_compiled_lapack_calls_do_not_import_scipy_linalg():
     out = subprocess.run([sys.executable, "-c", LAPACK_PROBE], capture_output=True, text=True,
                          check=True).stdout.split()
     assert out == ["True", "False", "True", "False", "True", "True"]
+
+
+ARCHIVE_PROBE = '''
+import importlib.machinery
+import sys
+
+served = []
+
+
+class Archive:
+    """A frozen application's importer (its archive's modules): ahead of the path's finder."""
+
+    def find_spec(self, name, path=None, target=None):
+        if name != "scipy.linalg":
+            return None
+        served.append(name)
+        return importlib.machinery.PathFinder.find_spec(name, path, target)
+
+
+sys.meta_path.insert(0, Archive())
+import pslog.fusion.filter  # noqa: E402,F401 (its import loads scipy's Cython LAPACK by file)
+
+print("scipy.linalg.cython_lapack" in sys.modules, "scipy.linalg" in sys.modules)
+import scipy.linalg  # noqa: E402
+
+print(served == ["scipy.linalg"],
+      scipy.linalg.cython_lapack is sys.modules["scipy.linalg.cython_lapack"])
+'''
+
+
+def test_scipy_linalg_imported_later_is_found_where_it_would_be():
+    # the finder cython_linalg_by_file puts ahead of every other takes the spec of the
+    # finder that would have found scipy.linalg without it (a frozen application's archive,
+    # an editable install's: the path's spec there is another module), not the path's
+    import subprocess
+    import sys
+
+    out = subprocess.run([sys.executable, "-c", ARCHIVE_PROBE], capture_output=True,
+                         text=True, check=True).stdout.split()
+    assert out == ["True", "False", "True", "True"]

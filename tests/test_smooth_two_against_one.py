@@ -100,3 +100,20 @@ def test_a_pair_whose_one_is_one_of_them_is_left_to_the_confirmation(arguments):
                   for i, b in enumerate(breaks)]
         out = trajectory._two_against_one(*state, spacing, placed, options)
         np.testing.assert_array_equal(out[p], placed[p])
+
+
+def test_a_region_without_detections_decides_nothing(arguments):
+    # (_region_costs' region, a break's reach either side, holds no detection where the
+    # piece's detections lie further apart than _WINDOW_SPANS spacings: a spacing under
+    # max_gap_s / 10, 3 cameras at 100 fps or more, and an occlusion; None, as an
+    # undetermined solve, not an IndexError out of the fit)
+    (problem, control, sigma, r, w, J, spacing, breaks, _), _ = arguments
+    X = problem.positions_known(control)
+    t_obs = problem.t[problem.rows]
+    # (the first piece's rows in time order, as _pieces_with_breaks gives them)
+    here = np.argsort(t_obs[:len(problem.rows_of_piece[0])], kind="stable")
+    t_here = t_obs[here]
+    for lo, hi in ((t_here[-1] + 1.0, t_here[-1] + 2.0), (t_here[3], t_here[3])):
+        assert trajectory._region_costs(
+            problem, X, r, J, w, sigma, spacing, here, t_here, lo, hi, breaks[0],
+            [(np.zeros(0), np.zeros(0)), (breaks[0][:1], np.zeros(0))]) is None

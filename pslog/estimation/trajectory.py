@@ -2137,9 +2137,13 @@ def _region_costs(problem: _Problem, X: np.ndarray, r: np.ndarray, J: np.ndarray
     time order, ``t_here`` their times) within ``[lo, hi]`` s, on uniform knots from its
     first detection with a triple knot at each break, per model ``(drop, add)`` of
     ``models``: the breaks of ``known`` (s) inside the region without those of ``drop``,
-    with those of ``add``. None where a model is undetermined (its banded solve failed)."""
+    with those of ``add``. None where a model is undetermined (its banded solve failed, or
+    the region holds fewer than two detections: a piece's detections may lie further apart
+    than ``_WINDOW_SPANS`` spacings where the spacing is under ``max_gap_s / 10``)."""
     i0 = int(np.searchsorted(t_here, lo, side="left"))
     i1 = int(np.searchsorted(t_here, hi, side="right"))
+    if i1 - i0 < 2:
+        return None
     sel = here[i0:i1]
     t_sel = t_here[i0:i1]
     inside = known[(known > t_sel[0]) & (known < t_sel[-1])]
