@@ -134,9 +134,11 @@ def fuse(session: Session | str | os.PathLike[str] | Detections,
         ``detector_offset_m`` None takes the session's default
         (:func:`pslog.fusion.detector_bias_for`: 0 for simulated sessions and bare
         detections, 0.5 mm per axis for detections found in images); its
-        ``confirm_every`` and ``confirm_sides`` None turn typeA's offline confirmation on
-        (:func:`pslog.fusion.offline_confirmation`: every point checked on each other
-        camera's side of a kick), for bare detections too
+        ``confirm_every``, ``confirm_sides`` and ``confirm_breaks`` None turn typeA's
+        offline confirmation on (:func:`pslog.fusion.offline_confirmation`: every point
+        checked on each other camera's side of a kick, and the points spanning a kick the
+        images show made from the detections after them: ``pslog fuse``'s default
+        ``--confirm-gaps jumps``, session 45), for bare detections too
     clock_uncertainty : a session synced by ``pslog sync`` (and ``options.clock_covariance``
         None): every point's covariance gains the uncertainty of the clocks it estimated
         and the rig still holds (:mod:`pslog.fusion.clock`), as ``pslog fuse

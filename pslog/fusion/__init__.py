@@ -145,7 +145,8 @@ class FusionOptions:
         (:mod:`pslog.fusion.breaks`; docs/methods.md, "Type A across a break: the backward
         pass (session 37)"). None (the default): on where :func:`for_session` turns
         ``confirm_sides`` on (session 45: ``pslog fuse``'s default ``--confirm-gaps jumps``;
-        ``kicks`` before), off otherwise (this module's :func:`fuse`, a stream)
+        ``kicks`` before), off otherwise (this module's :func:`fuse`, a stream: there a
+        ``break_source`` given with it None is not used)
     break_source : str, typeA with ``confirm_breaks``: where the kick instants come from:
         ``"image"`` (the default, session 45), each camera's image track alone
         (:func:`pslog.fusion.breaks.image_kicks_ns`: the jumps its detections show, no fit;
