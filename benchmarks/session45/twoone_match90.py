@@ -23,9 +23,10 @@ from pslog.evaluation import errors_m  # noqa: E402
 from pslog.fusion import fuse  # noqa: E402
 
 
-def main() -> None:
-    prefix = sys.argv[1]
-    minutes = float(sys.argv[2]) if len(sys.argv) > 2 else 90.0
+def trace_merges() -> list:
+    """Each merge ``trajectory._two_against_one`` makes from now on, as ``(the problem's t0
+    ns, the breaks it removed, the ones it added)`` (s from t0), in the list returned (empty
+    where this tree has no such rule)."""
     merges: list = []
     if hasattr(trajectory, "_two_against_one"):
         real = trajectory._two_against_one
@@ -39,6 +40,13 @@ def main() -> None:
             return out
 
         trajectory._two_against_one = traced
+    return merges
+
+
+def main() -> None:
+    prefix = sys.argv[1]
+    minutes = float(sys.argv[2]) if len(sys.argv) > 2 else 90.0
+    merges = trace_merges()
     rig = apply_timing(builtin_rig("paper3"), "typeA")
     det, truth = simulate(rig, get_motion("rally"), 60 * minutes,
                           SimulationOptions(noise_px=0.5, seed=1))

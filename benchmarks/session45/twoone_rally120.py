@@ -22,8 +22,10 @@ import numpy as np  # noqa: E402
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from fusion_equality import _lab_rig  # noqa: E402
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from twoone_match90 import trace_merges  # noqa: E402
+
 from pslog import SimulationOptions, apply_timing, builtin_rig, get_motion  # noqa: E402
-from pslog.estimation import trajectory  # noqa: E402
 from pslog.evaluation import errors_m  # noqa: E402
 from pslog.fusion import fuse  # noqa: E402
 from pslog.simulation import simulate_labelled  # noqa: E402
@@ -31,18 +33,7 @@ from pslog.simulation import simulate_labelled  # noqa: E402
 
 def main() -> None:
     prefix = sys.argv[1]
-    merges: list = []
-    if hasattr(trajectory, "_two_against_one"):
-        real = trajectory._two_against_one
-
-        def traced(*args, **kwargs):
-            out = real(*args, **kwargs)
-            before, after = np.concatenate(args[7]), np.concatenate(out)
-            if len(before) != len(after) or np.any(before != after):
-                merges.append((np.setdiff1d(before, after), np.setdiff1d(after, before)))
-            return out
-
-        trajectory._two_against_one = traced
+    merges = trace_merges()
     rigs = {"paper3": (apply_timing(builtin_rig("paper3"), "typeA"), 144),
             "lab3": (_lab_rig(), 148)}
     for name, (rig, seed) in rigs.items():
@@ -56,8 +47,9 @@ def main() -> None:
         np.savez(f"{prefix}_{name}.npz", time=track.time_ns, camera=track.camera, err=err)
         print(f"{name}: mean {1e3 * np.nanmean(err):.4f} mm, max {1e3 * np.nanmax(err):.1f}, "
               f">5cm {int(np.sum(err > 0.05))}, points {int(np.sum(np.isfinite(err)))}")
-        for gone, new in merges:
-            print(f"    merged {gone.round(4)} -> {new.round(4)}")
+        for t0_ns, gone, new in merges:
+            print(f"    merged {(gone + t0_ns / 1e9).round(4)} -> "
+                  f"{(new + t0_ns / 1e9).round(4)}")
 
 
 if __name__ == "__main__":
