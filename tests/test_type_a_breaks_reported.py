@@ -46,7 +46,8 @@ def test_fuse_eval_and_view_count_the_points_from_the_detections_after_them(tmp_
 
     code, out, err = cli("eval", fused)
     assert code == 0, err
-    assert "points made from the detections after them (--confirm-gaps breaks or jumps" in out, out
+    assert ("points made from the detections after them (--confirm-gaps jumps, the default, "
+            "or breaks") in out, out
     assert f"typeA     {n} of {len(track)} points" in out, out
     code, out, err = cli("eval", fused, "--json")
     assert code == 0, err
@@ -55,8 +56,9 @@ def test_fuse_eval_and_view_count_the_points_from_the_detections_after_them(tmp_
 
     rrd = tmp_path / "breaks.rrd"
     save_rrd([session, fused], rrd, methods="typeA")
-    assert (f"{n} typeA points made from the detections after them (--confirm-gaps breaks or "
-            f"jumps: span_s < 0, as pslog eval counts them) have none.") in _legend(rrd)
+    assert (f"{n} typeA points made from the detections after them (--confirm-gaps jumps, the "
+            f"default, or breaks: span_s < 0, as pslog eval counts them) have none."
+            ) in _legend(rrd)
 
     # the kick test alone (the default before session 45) replaces nothing, and none of
     # them says so
@@ -176,10 +178,10 @@ def test_a_break_without_a_backward_point_is_explained(tmp_path, cli):
     assert seen == [False]
     code, out, err = cli("eval", fused)
     assert code == 0, err
-    assert ("break: typeA (--confirm-gaps breaks or jumps): its construction spans a "
-            "velocity break of smooth's fit (jumps: a kick the cameras' images show), and "
-            "type A's point from the detections after it spans one too or was not made"
-            ) in out, out
+    assert ("break: typeA (--confirm-gaps jumps, the default, or breaks): its construction "
+            "spans a kick the cameras' images show (breaks: a velocity break of smooth's "
+            "fit), and type A's point from the detections after it spans one too or was not "
+            "made") in out, out
     assert json.loads(cli("eval", fused, "--json")[1])[0]["left_out"]["break"] == 1
 
 

@@ -331,8 +331,8 @@ def _legend(data: ViewData, colors) -> str:
         if n_backward:
             lines[-1] += (f" {n_backward} typeA point{'s' if n_backward > 1 else ''} made "
                           f"from the detections after {'them' if n_backward > 1 else 'it'} "
-                          "(--confirm-gaps breaks or jumps: span_s < 0, as pslog eval counts "
-                          "them) "
+                          "(--confirm-gaps jumps, the default, or breaks: span_s < 0, as "
+                          "pslog eval counts them) "
                           f"{'have' if n_backward > 1 else 'has'} none.")
     return "\n".join(lines)
 

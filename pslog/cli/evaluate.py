@@ -178,9 +178,10 @@ def run(args: argparse.Namespace) -> int:
                 print(f"  {m}: {REJECTED_TEXT[m]}")
         if backward:
             print()
-            print("points made from the detections after them (--confirm-gaps breaks or "
-                  "jumps: the paper's construction, from the detections before, spanned a "
-                  "velocity break of smooth's fit or a kick the images show; type A's point "
+            print("points made from the detections after them (--confirm-gaps jumps, the "
+                  "default, or breaks: the paper's construction, from the detections before, "
+                  "spanned a kick the images show or a velocity break of smooth's fit; type A's "
+                  "point "
                   "from the time-reversed detections replaced it; span_s < 0; in the tables "
                   "with the rest, no Figure 2 in pslog view):")
             for m, n in backward.items():
