@@ -393,9 +393,9 @@ def _nearest(prep: Prepared, rig: Rig, options: FusionOptions, *, drops: Drops |
 def _type_a(prep: Prepared, rig: Rig, options: FusionOptions, *,
             breaks_ns: np.ndarray | Callable[[], np.ndarray] | None = None,
             wanted: np.ndarray | None = None) -> Track:
-    """Type A's offline track (``breaks_ns``: ``confirm_breaks``' breaks of ``smooth``'s
-    fit of the session, given or a callable giving them; None: the fit of ``prep``,
-    :func:`pslog.fusion.breaks.fit_breaks_ns`). ``wanted`` ((k,) int64 :func:`pslog.records.
+    """Type A's offline track (``breaks_ns``: ``confirm_breaks``' kick instants, given or a
+    callable giving them; None: ``break_source``'s, the images' jumps or the fit of ``prep``:
+    :func:`_across_kicks`). ``wanted`` ((k,) int64 :func:`pslog.records.
     point_keys`, or None: every point): only the points on these detections are kept, each
     with the bits it has in the whole track (the kernel still runs on every detection: its
     tests' noise is a causal median over every point; the confirmation and the covariance's

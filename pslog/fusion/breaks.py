@@ -13,7 +13,9 @@ them, its rule for the choices in doubt), made once when both methods are fused
 beside it; before, type A fitted its own causal gate's choices, a second whole fit in a
 default ``pslog fuse`` (docs/methods.md, "One fit for both (session 44)").
 
-With ``FusionOptions.confirm_breaks`` (``pslog fuse --confirm-gaps breaks``), a type A point
+With ``FusionOptions.confirm_breaks`` (``pslog fuse --confirm-gaps breaks``: the fit's breaks;
+``jumps``, the offline default since session 45: the kick instants the images show,
+:func:`image_kicks_ns`), a type A point
 whose construction spans a break (one in ``(t - span_s, t]``) is replaced by the backward
 pass's point on the same detection (made with the same options, its own covariance) when
 that construction spans none (none in ``[t, t + span_b)``), and is withheld (``break`` in
@@ -334,14 +336,16 @@ def across_breaks(prep: Prepared, track: Track, rig: Rig, options,
                   type_a: Callable[..., Track],
                   breaks_ns: np.ndarray | Callable[[], np.ndarray] | None = None) -> Track:
     """``track`` (type A's from ``prep`` under ``options``, FusionOptions with ``max_gap_s``
-    set) with each point spanning a break of the session's fit replaced by the backward
+    set) with each point spanning a kick instant (a break of the session's fit, or a jump the
+    images show: ``breaks_ns``) replaced by the backward
     pass's point on its detection, or withheld (``break``) when that one spans a break too or
     is missing (the module's rule). ``type_a(prep, rig, options, wanted=keys)`` makes a type A
     track (the backward pass: ``options`` with ``confirm_breaks`` off) of the points on the
     detections ``keys`` names (:func:`pslog.records.point_keys`; :func:`pslog.fusion._type_a`).
     A replaced point takes every column of the backward point, its ``span_s`` negated (the
     point's time minus the latest capture it uses). The other points are ``track``'s rows,
-    unchanged. ``breaks_ns``: the fit's breaks, given, or a callable that gives them (a
+    unchanged. ``breaks_ns``: the instants (the images' or the fit's), given, or a callable
+    that gives them (a
     :class:`SessionFit`'s ``take_breaks``: the fit of ``smooth``'s own input, called once the
     forward track is made); None: the fit of ``prep`` (:func:`fit_breaks_ns`)."""
     if not len(track) or "span_s" not in track.quality:
