@@ -123,6 +123,18 @@ def _stamped_locators(numba_caching: Any) -> None:
     impl._pslog_stamped = True
 
 
+def _scipy_linalg_file(name: str) -> Any:
+    """The import system's spec of ``scipy.linalg.<name>`` found in scipy's ``linalg``
+    folder by the path finder's own search, without importing :mod:`scipy.linalg` (None:
+    not there)."""
+    import importlib.machinery
+
+    import scipy
+
+    folders = [os.path.join(path, "linalg") for path in getattr(scipy, "__path__", [])]
+    return importlib.machinery.PathFinder.find_spec(name, folders)
+
+
 def _blas_found_by_file(numba_linalg: Any) -> None:
     """numba's ``ensure_blas`` for the one call its ``numba.np.arraymath`` makes at import,
     giving the same verdict without importing :mod:`scipy.linalg`.
@@ -139,12 +151,8 @@ def _blas_found_by_file(numba_linalg: Any) -> None:
     (the filter's window fit: LAPACK; type A, nearest, the gate, smooth: none, so a command
     of those alone never imports :mod:`scipy.linalg`); later callers (a kernel's ``np.dot``
     or ``np.linalg`` compiled) get numba's own function back."""
-    import importlib.machinery
-
-    import scipy  # (numba has imported it: its version check)
-
-    folders = [os.path.join(path, "linalg") for path in getattr(scipy, "__path__", [])]
-    if importlib.machinery.PathFinder.find_spec("cython_blas", folders) is None:
+    # (scipy: numba has imported it, its version check)
+    if _scipy_linalg_file("cython_blas") is None:
         raise ImportError("scipy 0.16+ is required for linear algebra")
     check = getattr(numba_linalg, "_check_lapack_int_width", None)
     if check is not None:
@@ -290,13 +298,8 @@ def cython_linalg_by_file() -> None:
     if "scipy.linalg" in sys.modules or all(f"scipy.linalg.{n}" in sys.modules
                                             for n in _CYTHON_LINALG):
         return
-    import importlib.machinery
-
     try:
-        import scipy
-
-        folders = [os.path.join(path, "linalg") for path in getattr(scipy, "__path__", [])]
-        specs = [importlib.machinery.PathFinder.find_spec(n, folders) for n in _CYTHON_LINALG]
+        specs = [_scipy_linalg_file(n) for n in _CYTHON_LINALG]
         if any(s is None or not s.origin for s in specs):
             return
         if _LINALG_FINDER not in sys.meta_path:
