@@ -37,8 +37,10 @@ camera's frames in (key, push) order at rows ``0 .. count[c]-1``):
 
 - ``fi`` (m, H, 4) int64: key (the first candidate's corrected time, ns), logged time ns,
   push id, number of candidates;
-- ``fflag`` (m, H, 2) int8: decided, support narrowed (decided with a rejected candidate:
-  only its chosen and outscored candidates still support, :func:`gating._supporting`);
+- ``fflag`` (m, H, 2) int8: decided, support narrowed (1: decided with a rejected candidate:
+  only its chosen and outscored candidates still support, :func:`gating._supporting`; 2:
+  offline, decided with every candidate rejected: it supports with every candidate or as
+  an empty frame, the better, :func:`gating._emptied`);
 - ``ct`` (m, H, K) int64 corrected times; ``cf`` (m, H, K, 9) float64: undistorted u, v,
   unit ray x, y, z, the all-candidates 3D point x, y, z, whether its support held (1.0, else
   0.0; NaN until decided: gating._held); ``csup`` (m, H, K) int8: may support;
@@ -147,10 +149,16 @@ def _line_of(f, u, v):
 
 
 @kernel
-def _n_usable(csup, b, j, n, narrowed):
-    """How many candidates of camera b's frame j may support (all: ``narrowed`` False)."""
-    if not narrowed:
+def _n_usable(csup, b, j, n, flag, mode):
+    """How many candidates of camera b's frame j (``flag``: its ``fflag[b, j, 1]``) may
+    support: all where ``mode`` is 0 (every candidate) or the frame is undecided or chosen
+    from whole; a narrowed frame's (flag 1) chosen and outscored; an emptied frame's
+    (flag 2, every candidate rejected offline) all in ``mode`` 1, none in ``mode`` 2 (it
+    carries as the empty frame it is for the ball: gating._support_one's two carries)."""
+    if mode == 0 or flag == 0:
         return n
+    if flag == 2:
+        return 0 if mode == 2 else n
     got = 0
     for q in range(n):
         if csup[b, j, q]:
@@ -159,11 +167,11 @@ def _n_usable(csup, b, j, n, narrowed):
 
 
 @kernel
-def support_one(t, l0, l1, l2, b, keys, fi, fflag, ct, cf, csup, right, narrowed, opt):
+def support_one(t, l0, l1, l2, b, keys, fi, fflag, ct, cf, csup, right, mode, opt):
     """gating._support_one for one candidate at corrected time ``t`` (its epipolar line
     ``l`` in camera b) over b's kept frames (``keys``: their times): from every candidate
-    (``narrowed`` False) or from the candidates that may support (``csup``) of frames
-    decided with a rejected one. ``right``: bisect_right (else bisect_left). Causal where
+    (``mode`` 0) or as decided (:func:`_n_usable`: 1 with the frames decided with every
+    candidate rejected, 2 without them). ``right``: bisect_right (else bisect_left). Causal where
     ``opt[O_CAUSAL]`` (the frames up to ``t`` + wait); else offline: the two usable frames
     around ``t`` (interpolated), extrapolated from the two before only where b has no usable
     frame after ``t`` (the batch gate's offline form, :func:`gate_frames`).
@@ -175,18 +183,18 @@ def support_one(t, l0, l1, l2, b, keys, fi, fflag, ct, cf, csup, right, narrowed
     last = (np.searchsorted(keys, target, side="right") if right
             else np.searchsorted(keys, target, side="left")) - 1
     i1 = last
-    while i1 >= 0 and _n_usable(csup, b, i1, fi[b, i1, 3],
-                                narrowed and fflag[b, i1, 1] != 0) == 0:
+    while i1 >= 0 and _n_usable(csup, b, i1, fi[b, i1, 3], fflag[b, i1, 1],
+                                mode) == 0:
         i1 -= 1
     i0 = i1 - 1
-    while i0 >= 0 and _n_usable(csup, b, i0, fi[b, i0, 3],
-                                narrowed and fflag[b, i0, 1] != 0) == 0:
+    while i0 >= 0 and _n_usable(csup, b, i0, fi[b, i0, 3], fflag[b, i0, 1],
+                                mode) == 0:
         i0 -= 1
     inext = -1
     if not causal:
         inext = last + 1
         while inext < keys.shape[0] and _n_usable(csup, b, inext, fi[b, inext, 3],
-                                                  narrowed and fflag[b, inext, 1] != 0) == 0:
+                                                  fflag[b, inext, 1], mode) == 0:
             inext += 1
         if inext == keys.shape[0]:
             inext = -1
@@ -197,8 +205,8 @@ def support_one(t, l0, l1, l2, b, keys, fi, fflag, ct, cf, csup, right, narrowed
     near_p1 = p1 >= 0 and abs(t - keys[p1]) <= gap
     if near0 and near_p1:
         best, bu, bv, found = math.inf, math.nan, math.nan, False
-        only0 = narrowed and fflag[b, p0, 1] != 0
-        only1 = narrowed and fflag[b, p1, 1] != 0
+        only0 = mode != 0 and fflag[b, p0, 1] == 1
+        only1 = mode != 0 and fflag[b, p1, 1] == 1
         for q0 in range(fi[b, p0, 3]):
             if only0 and not csup[b, p0, q0]:
                 continue
@@ -222,7 +230,7 @@ def support_one(t, l0, l1, l2, b, keys, fi, fflag, ct, cf, csup, right, narrowed
         return best, bu, bv, found
     if near1:  # a single nearby frame, its candidates as they are
         best, bu, bv, found = math.inf, math.nan, math.nan, False
-        only1 = narrowed and fflag[b, i1, 1] != 0
+        only1 = mode != 0 and fflag[b, i1, 1] == 1
         for q1 in range(fi[b, i1, 3]):
             if only1 and not csup[b, i1, q1]:
                 continue
@@ -1039,7 +1047,7 @@ def decide_at(a, at, fi, fflag, ct, cf, csup, count, trk, ist, F, centers, k_inv
                     lag[j, b] = best_gap / _NS
             l0, l1, l2 = _line_of(F[a, b], u, v)
             r, cu, cv, found = support_one(t, l0, l1, l2, b, keys, fi, fflag, ct, cf, csup,
-                                           right, False, opt)
+                                           right, 0, opt)
             r_every[j, b] = r
             if found:
                 c_every[j, b, 0], c_every[j, b, 1] = cu, cv
@@ -1047,14 +1055,21 @@ def decide_at(a, at, fi, fflag, ct, cf, csup, count, trk, ist, F, centers, k_inv
             # the frames the support may reach (offline: those after t within the gap too)
             reach = last if causal else np.searchsorted(keys, t + gap, side="right")
             narrowed = False
+            emptied = False
             for i in range(first, reach):
-                if fflag[b, i, 1]:
+                if fflag[b, i, 1] == 1:
                     narrowed = True
-                    break
-            if narrowed:
+                elif fflag[b, i, 1] == 2:
+                    emptied = True
+            if narrowed or emptied:
                 r, cu, cv, found = support_one(t, l0, l1, l2, b, keys, fi, fflag, ct, cf,
-                                               csup, right, True, opt)
+                                               csup, right, 1, opt)
                 differs[j] = 1.0
+            if emptied:  # the better of the two carries (gating._support_one)
+                r2, cu2, cv2, found2 = support_one(t, l0, l1, l2, b, keys, fi, fflag, ct, cf,
+                                                   csup, right, 2, opt)
+                if r2 < r:
+                    r, cu, cv, found = r2, cu2, cv2, found2
             r_dec[j, b] = r
             if found:
                 c_dec[j, b, 0], c_dec[j, b, 1] = cu, cv
@@ -1260,6 +1275,8 @@ def decide_at(a, at, fi, fflag, ct, cf, csup, count, trk, ist, F, centers, k_inv
             for j in range(k):
                 if not (reason[j] < 0 or reason[j] == _OUTSCORED):
                     csup[a, at, j] = 0
+        elif not any_chosen and not causal:  # gating._emptied
+            fflag[a, at, 1] = 2
     return t_s_frame
 
 

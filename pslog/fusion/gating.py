@@ -543,6 +543,14 @@ def _support(c: _Candidates, rig: Rig, F: np.ndarray, tables, options: GatingOpt
     return ratio, carried, used
 
 
+#: False: :func:`_decide_in_order` foresees no frame that may be emptied (:func:`_emptied`),
+#: so every one emptied makes the choice again (tests check the same choices come out)
+FORESEE_EMPTIED = True
+
+#: frames that may be emptied (:func:`_emptied`) up to which :func:`_decide_pass` marks
+#: the frames whose support used one span by span (beyond, over every frame at once)
+_FEW_SPANS = 256
+
 #: candidate pairs :func:`_support`'s numpy form holds at once (a block of candidates, each
 #: with K² pairs of another camera's two frames; ~100 bytes a pair)
 _SUPPORT_PAIRS = 1 << 20
@@ -1928,31 +1936,28 @@ def _decide_in_order(c: _Candidates, rig: Rig, options: GatingOptions, frames, t
     """:class:`_Decider` over the frames in order, each frame's support as decided so far
     (:func:`_support_one`): the all-candidates support and points computed in arrays
     (``support``: :func:`_support`'s; ``geometry``: points, in_front) hold while no frame
-    they used has been decided with a rejected candidate; a candidate whose support used one
-    is recomputed on floats (the stream gate's arithmetic, the same bits). The stillness
-    (``still``: :func:`_static`'s) stays the all-candidates one: whether an object stands
-    still is a fact of the scene, whichever candidates were chosen (a static object the gate
-    rejects must stay still to the test). Sets ``reason`` of every rejected row.
+    they used has been decided with a rejected candidate (or, offline, with every candidate
+    rejected: :func:`_emptied`); a candidate whose support used one is recomputed on floats
+    (the stream gate's arithmetic, the same bits). The stillness (``still``:
+    :func:`_static`'s) stays the all-candidates one: whether an object stands still is a
+    fact of the scene, whichever candidates were chosen (a static object the gate rejects
+    must stay still to the test). Sets ``reason`` of every rejected row.
 
     ``frames``: ``(starts, ends, order)``, each frame's candidate rows ``starts[f]:ends[f]``
     (frames in row order) and the order to decide them in. Only a frame with several
-    candidates can be decided with one rejected (:func:`_supporting`), so only a frame whose
-    support used such a frame may need its support redone; the others are decided in blocks
-    (:meth:`_Decider.decide` over many frames), and a run of frames of one candidate that
-    two other cameras support with meeting rays, neither static nor behind a camera (each
-    one chosen, whatever the track says) only adds its points to the track.
+    candidates can be decided with one rejected (:func:`_supporting`), and offline only a
+    frame the gate does not take whole can be decided with none chosen, so only a frame
+    whose support used such a frame may need its support redone; the others are decided in
+    blocks (:meth:`_Decider.decide` over many frames), and a run of frames of one candidate
+    that two other cameras support with meeting rays, neither static nor behind a camera
+    (each one chosen, whatever the track says) only adds its points to the track. (A frame
+    of that kind whose redone support rejects it after all: the choice is made again with
+    it among those that may be emptied, :func:`_emptied`.)
     """
-    ratio, carried, used, lag = support
+    ratio, carried, used, _ = support
     points, in_front = geometry
-    static, stillness, lone = still
+    static, _, lone = still
     starts, ends, order = frames
-    decider = _Decider(rig, options)
-    if not causal:
-        # offline, the stillness rule's premise is the whole session's: a frame of several
-        # candidates anywhere (before or after) says the scene holds more than the ball, so
-        # a static object seen alone before the ball enters is one from the first frame
-        # (docs/methods.md "Stillness"); the causal form always takes it (_Decider)
-        decider.several = bool(np.any(ends - starts >= 2))
     m = len(rig)
     # candidates whose all-candidates support used a frame with several candidates
     several = [table[:, 1] >= 0 if table.shape[1] > 1 else np.zeros(len(table), dtype=bool)
@@ -1962,24 +1967,102 @@ def _decide_in_order(c: _Candidates, rig: Rig, options: GatingOptions, frames, t
         if several[b].any():
             u = used[:, b, :]
             may_redo |= np.any((u >= 0) & several[b][np.maximum(u, 0)], axis=1)
-    redo_frame = np.logical_or.reduceat(may_redo, starts)[order]
     lo_all, hi_all = starts[order], ends[order]
     single = (hi_all - lo_all) == 1
     with np.errstate(invalid="ignore"):
         strong = ((ratio <= 1.0).sum(axis=1) >= 2) & np.isfinite(points[:, 0])
     first = lo_all
-    simple = (single & ~redo_frame & strong[first] & ~static[first] & np.isnan(lone[first])
-              & in_front[first])
+    whole = (single & strong[first] & ~static[first] & np.isnan(lone[first])
+             & in_front[first])
+    position = np.zeros(len(c.camera), dtype=np.int64)  # a frame's first row -> table row
+    for _, table in tables:
+        position[table[:, 0]] = np.arange(len(table))
+    frame_cam = c.camera[lo_all]  # each frame's camera, in the order
+    frame_camera = frame_cam.tolist()
+    frame_time = c.time_ns[lo_all]  # (sorted: the order is by time)
+    redo_several = np.logical_or.reduceat(may_redo, starts)[order]
+    # offline: the frames that may be decided with none chosen (_emptied), per camera's
+    # frame table: all but those taken whole (redone or not); more where a choice made again
+    # found one
+    may_empty = []
+    if not causal:
+        left = np.flatnonzero(~(whole & ~redo_several))  # (few on a clean session)
+        if not FORESEE_EMPTIED:
+            left = left[:0]
+        for b, (_, table) in enumerate(tables):
+            empty = np.zeros(len(table), dtype=bool)
+            empty[position[lo_all[left[frame_cam[left] == b]]]] = True
+            may_empty.append(empty)
+    saved: dict[int, tuple] = {}  # a redone row's array values, for a choice made again
+    while True:
+        again = _decide_pass(c, rig, options, tables, F, support, geometry, still, reason,
+                             causal, wait_ns, max_gap_ns, constants, may_empty, saved,
+                             (lo_all, hi_all, single, whole, position, frame_camera,
+                              frame_cam, frame_time, redo_several, order))
+        if not again:
+            return
+        for b, js in enumerate(again):
+            may_empty[b][sorted(js)] = True
+        for i, (r, cu, p, ok) in saved.items():
+            ratio[i], carried[i], points[i], in_front[i] = r, cu, p, ok
+        saved.clear()
+        reason[:] = -1
+
+
+def _decide_pass(c: _Candidates, rig: Rig, options: GatingOptions, tables, F, support,
+                 geometry, still, reason, causal: bool, wait_ns: int, max_gap_ns: int,
+                 constants, may_empty, saved, layout) -> list[set[int]]:
+    """One pass of :func:`_decide_in_order`'s choice over every frame. ``may_empty``: per
+    camera, its frames that may be decided with none chosen (offline; empty list causal);
+    ``saved``: gets each redone row's array values before its first redo. Returns, per
+    camera, the frames emptied outside ``may_empty`` (a choice to make again), or an empty
+    list."""
+    ratio, carried, used, lag = support
+    points, in_front = geometry
+    static, stillness, lone = still
+    (lo_all, hi_all, single, whole, position, frame_camera, frame_cam, frame_time,
+     redo_several, order) = layout
+    m = len(rig)
+    decider = _Decider(rig, options)
+    if not causal:
+        # offline, the stillness rule's premise is the whole session's: a frame of several
+        # candidates anywhere (before or after) says the scene holds more than the ball, so
+        # a static object seen alone before the ball enters is one from the first frame
+        # (docs/methods.md "Stillness"); the causal form always takes it (_Decider)
+        decider.several = bool(np.any(hi_all - lo_all >= 2))
+    redo_frame = redo_several
+    if may_empty:
+        # offline the support used b's frames last - 1, last, last + 1 (``used``; last the
+        # latest at or before the candidate's time): a frame of one candidate at t used
+        # b's frame j iff keys[j - 1] <= t < keys[j + 2], a span of the frames in time
+        # order (a gather of ``used`` cost 25 ms at 90 minutes); a frame of several
+        # candidates (times of their own) is decided by itself anyway: its turn checks
+        n_frames = len(order)
+        redo_frame = redo_several | ~single
+        for b, (keys_b, _) in enumerate(tables):
+            js = np.flatnonzero(may_empty[b])
+            if len(js) == 0:
+                continue
+            since = np.where(js >= 1, keys_b[np.maximum(js - 1, 0)], np.iinfo(np.int64).min)
+            until = np.where(js + 2 < len(keys_b),
+                             keys_b[np.minimum(js + 2, len(keys_b) - 1)],
+                             np.iinfo(np.int64).max)
+            first = np.searchsorted(frame_time, since)
+            stop = np.searchsorted(frame_time, until)
+            if len(js) <= _FEW_SPANS:
+                spans = np.concatenate([np.arange(f, e) for f, e in
+                                        zip(first.tolist(), stop.tolist(), strict=True)])
+            else:
+                cover = np.cumsum(np.bincount(first, minlength=n_frames + 1)
+                                  - np.bincount(stop, minlength=n_frames + 1))
+                spans = np.flatnonzero(cover[:-1] > 0)
+            redo_frame[spans[frame_cam[spans] != b]] = True
+    simple = whole & ~redo_frame
     special = ~single | redo_frame
     # each frame's kind: 0 simple, 1 any other frame decided as it comes, 2 special
     kind = np.where(simple, 0, np.where(special, 2, 1))
     cuts = np.flatnonzero(np.r_[True, kind[1:] != kind[:-1], True])
-    frame_camera = c.camera[lo_all].tolist()  # each frame's camera, in the order
 
-    # what the special frames need, made as they come
-    position = np.zeros(len(c.camera), dtype=np.int64)  # a frame's first row -> table row
-    for _, table in tables:
-        position[table[:, 0]] = np.arange(len(table))
     keys_cache: dict[int, list[int]] = {}
 
     def keys(b: int) -> list[int]:
@@ -1988,14 +2071,19 @@ def _decide_in_order(c: _Candidates, rig: Rig, options: GatingOptions, frames, t
         return keys_cache[b]
 
     # per camera: the candidates of a decided frame that may support (_supporting), where
-    # they are not all its candidates; and the frames so decided (spoiled)
+    # they are not all its candidates; the frames so decided (spoiled); offline, the frames
+    # decided with none chosen (emptied: _emptied), and those outside ``may_empty``
     kept_of: list[dict[int, list]] = [{} for _ in range(m)]
     spoiled: list[set[int]] = [set() for _ in range(m)]
+    emptied: list[set[int]] = [set() for _ in range(m)]
+    unforeseen: list[set[int]] = [set() for _ in range(m)]
 
-    def usable_of(b: int):
-        table, kept = tables[b][1], kept_of[b]
+    def usable_of(b: int, skip: bool = False):
+        table, kept, gone = tables[b][1], kept_of[b], emptied[b]
 
         def usable(j: int) -> list:
+            if skip and j in gone:
+                return []
             got = kept.get(j)
             if got is None:
                 got = [(int(c.time_ns[r]), *c.uv_und[r].tolist()) for r in table[j].tolist()
@@ -2005,6 +2093,26 @@ def _decide_in_order(c: _Candidates, rig: Rig, options: GatingOptions, frames, t
 
     F_lists = F.tolist()
     lags = [int(np.ceil(options.static_s * cam.fps)) for cam in rig.cameras]  # as _static
+
+    def judged(a: int, at: int) -> bool:
+        return _can_judge(keys(a)[at], [keys(a)[at - lag] for lag in
+                                        range(1, min(lags[a], at) + 1)], lags[a], options)
+
+    def mark_emptied(k0: int, k1: int) -> None:
+        """Offline: the frames k0:k1 of the order decided with none chosen (_emptied)."""
+        if causal:
+            return
+        lo, hi = lo_all[k0:k1], hi_all[k0:k1]
+        if k1 - k0 == 1:
+            none = [0] if _emptied(reason[int(lo[0]):int(hi[0])].tolist()) else []
+        else:  # (a block: frames of one candidate each)
+            none = np.flatnonzero(reason[lo] >= 0).tolist()
+        for k in none:
+            a, at = frame_camera[k0 + k], int(position[lo[k]])
+            if judged(a, at):
+                emptied[a].add(at)
+                if not may_empty[a][at]:
+                    unforeseen[a].add(at)
 
     def decide_block(k0: int, k1: int) -> None:
         """Frames k0:k1 of the order by one decide() call on their candidates' columns."""
@@ -2042,16 +2150,21 @@ def _decide_in_order(c: _Candidates, rig: Rig, options: GatingOptions, frames, t
             continue
         if kind[s] == 1:
             for k0 in range(s, e, _DECIDE_BLOCK):
-                decide_block(k0, min(k0 + _DECIDE_BLOCK, e))
+                k1 = min(k0 + _DECIDE_BLOCK, e)
+                decide_block(k0, k1)
+                mark_emptied(k0, k1)
             continue
         for k in range(s, e):
             lo, hi = int(lo_all[k]), int(hi_all[k])
             a = int(c.camera[lo])
             redo = bool(redo_frame[k]) and any(
-                j >= 0 and j in spoiled[b] for row in used[lo:hi].tolist()
-                for b in range(m) if b != a for j in row[b])
+                j >= 0 and (j in spoiled[b] or j in emptied[b])
+                for row in used[lo:hi].tolist() for b in range(m) if b != a for j in row[b])
             if redo:
                 for i in range(lo, hi):
+                    if i not in saved:
+                        saved[i] = (ratio[i].copy(), carried[i].copy(), points[i].copy(),
+                                    bool(in_front[i]))
                     t_i = int(c.time_ns[i])
                     und_i = c.uv_und[i].tolist()
                     for b in range(m):
@@ -2059,9 +2172,16 @@ def _decide_in_order(c: _Candidates, rig: Rig, options: GatingOptions, frames, t
                             continue
                         search = (bisect_right if (not causal or wait_ns > 0 or b < a)
                                   else bisect_left)
-                        r, uv = _support_one(t_i, _line_of(F_lists[a][b], *und_i), keys(b),
-                                             usable_of(b), search, wait_ns, causal,
-                                             max_gap_ns, options)
+                        line = _line_of(F_lists[a][b], *und_i)
+                        r, uv = _support_one(t_i, line, keys(b), usable_of(b), search, wait_ns,
+                                             causal, max_gap_ns, options)
+                        if any(j in emptied[b] for j in used[i, b].tolist()):
+                            # the better of the two carries (_emptied)
+                            r2, uv2 = _support_one(t_i, line, keys(b), usable_of(b, True),
+                                                   search, wait_ns, causal, max_gap_ns,
+                                                   options)
+                            if r2 < r:
+                                r, uv = r2, uv2
                         ratio[i, b] = r
                         carried[i, b] = uv if uv is not None else (math.nan, math.nan)
                     p, ok, miss = _points_one(a, c.ray_dir[i].tolist(), ratio[i].tolist(),
@@ -2069,17 +2189,18 @@ def _decide_in_order(c: _Candidates, rig: Rig, options: GatingOptions, frames, t
                     points[i] = p if p is not None and not miss > options.track_m else math.nan
                     in_front[i] = ok
             decide_block(k, k + 1)
+            mark_emptied(k, k + 1)
             if hi - lo < 2:
                 continue  # one candidate: every one may support (_supporting)
             kept = _supporting(reason[lo:hi].tolist())
             if kept is None:
                 continue
             at = int(position[lo])
-            if _can_judge(keys(a)[at], [keys(a)[at - lag] for lag in
-                                        range(1, min(lags[a], at) + 1)], lags[a], options):
+            if judged(a, at):
                 spoiled[a].add(at)
                 kept_of[a][at] = [(int(c.time_ns[i]), *c.uv_und[i].tolist())
                                   for i, ok in zip(range(lo, hi), kept, strict=True) if ok]
+    return unforeseen if any(unforeseen) else []
 
 
 def _supporting(reasons: list[int]) -> list[bool] | None:
@@ -2090,6 +2211,21 @@ def _supporting(reasons: list[int]) -> list[bool] | None:
     if all(r < 0 or r == OUTSCORED for r in reasons) or not any(r < 0 for r in reasons):
         return None
     return [r < 0 or r == OUTSCORED for r in reasons]
+
+
+def _emptied(reasons: list[int]) -> bool:
+    """Whether an offline choice decided a frame (its candidates' ``reason`` codes, -1
+    chosen) with every candidate rejected: then, where the stillness test could judge it
+    (:func:`_can_judge`), a later choice's support (:func:`_decide_in_order`, the compiled
+    ``decide_at``) carries the better of two: with every candidate of the frame, as with
+    any frame decided with none chosen (:func:`_supporting`: dropping them made rejections
+    self-sustaining), and with the frame skipped, as the empty frame it is for the ball
+    (the lower ratio; a skip that finds no frame near never wins). A camera that missed the
+    ball in a frame that held only a static object or a blob otherwise carried that object
+    into the next choice of the other cameras, and the ball there was rejected (``paper3``
+    rally-79906, docs/methods.md "Held out (session 45"). The causal forms keep the one
+    carry (the stream gate's, bit for bit)."""
+    return not any(r < 0 for r in reasons)
 
 
 def _can_judge(key: int, earlier: list[int], lags: int, options: GatingOptions) -> bool:
