@@ -4,8 +4,13 @@ detections"): the ball was where the fit is not, a kick or bounce its break sear
 
 Found on held-out sessions (session 43, ``bench_dirty.py --more --first-seed 74500 --fps 120``):
 on ``wide3`` at 120 fps, one camera blind until 2.6 s, the piece that starts when it sees again
-holds a kick 29 ms later; the fit takes the motion after the kick and rejects the four
+holds a kick 29 ms later; the fit took the motion after the kick and rejected the four
 detections of two cameras between, its points there 31-60 mm off at a ``std_m`` of 4-5 mm.
+Since session 46 the fit places that kick's break (``trajectory._one_against_two``: its one
+break, 6.5 ms before the kick, tested against two in its place): no run is left there. The
+live case is now ``paper2`` rally-80905 of ``bench_dirty.py --more --first-seed 80900
+--misses 0.2`` with the faults: a kick at 6.7384 s with no break within two spacings (the
+fit found none), three detections of two cameras after it rejected, 20-60 mm off.
 """
 
 from __future__ import annotations
@@ -17,7 +22,7 @@ import pytest
 from _rally import dirty_rally
 from _rigs import ring_rig
 
-from pslog import Rig
+from pslog import Rig, apply_timing, builtin_rig
 from pslog.evaluation import LEFT_OUT_TEXT, errors_m
 from pslog.fusion import FusionOptions, prepare
 from pslog.fusion._prepare import default_max_gap_s
@@ -71,8 +76,8 @@ def _wide3_120() -> Rig:
                      for c in rig.cameras), "wide3@120")
 
 
-@pytest.fixture(scope="module")
-def session():
+def test_the_kick_after_the_camera_is_back_is_fitted():
+    # session 43's case: the fit now has the kick's break (session 46), nothing to withhold
     rig = _wide3_120()
     seed = 74501
     motion, kicks = dirty_rally(seed)
@@ -80,35 +85,52 @@ def session():
                                 distractors=(("wide3-3", (1.0, 1.5, 0.2)),),
                                 blackouts=(("wide3-2", 2.1, 0.5),))
     detections, truth, _ = simulate_labelled(rig, motion, 8.0, options)
+    assert np.any(np.abs(np.asarray(kicks) - 2.632) < 1e-3)
+    track = fuse_detections(detections, rig, ["smooth"], FusionOptions())[0]["smooth"]
+    assert "contradicted_run" not in track.dropped
+    assert np.nanmax(errors_m(track, truth)) < 0.01  # (withheld before: 4 points to 60 mm)
+
+
+@pytest.fixture(scope="module")
+def session():
+    """bench_dirty's ``paper2`` rally-80905 of ``--first-seed 80900 --misses 0.2`` with the
+    faults (spurious blobs, the static object seen by cam2, cam1 blind for 0.5 s)."""
+    rig = apply_timing(builtin_rig("paper2"), "typeA")
+    seed = 80905
+    motion, kicks = dirty_rally(seed)
+    options = SimulationOptions(noise_px=0.3, seed=seed - 300, miss_rate=0.2, drop_rate=0.1,
+                                spurious_rate=0.05, distractors=(("cam2", (1.0, 1.5, 0.2)),),
+                                blackouts=(("cam1", 2.5, 0.5),))
+    detections, truth, _ = simulate_labelled(rig, motion, 8.0, options)
     return rig, detections, truth, np.asarray(kicks)
 
 
 def test_no_point_where_two_cameras_contradict_the_fit(session):
     rig, detections, truth, kicks = session
-    assert np.any(np.abs(kicks - 2.632) < 1e-3)  # the kick 29 ms after the camera is back
+    assert np.any(np.abs(kicks - 6.7384) < 1e-3)  # the kick the fit has no break for
     track = fuse_detections(detections, rig, ["smooth"], FusionOptions())[0]["smooth"]
-    err = errors_m(track, truth)
-    assert np.nanmax(err) < 0.05
-    assert track.dropped["contradicted_run"] == 4
+    assert track.dropped["contradicted_run"] == 3
     assert "contradicted_run" in LEFT_OUT_TEXT
     t = track.time_ns / 1e9
-    assert not np.any((t > 2.612) & (t < 2.632))
-    # the case is live: the fit itself (before the track withholds anything) rejects four
-    # detections of two cameras there, its positions at them up to 60 mm off at a std of
-    # under 1 cm; every other detection's point is the track's
+    assert not np.any((t > 6.6834) & (t < 6.7666))
+    # the case is live: the fit itself (before the track withholds anything) rejects three
+    # detections of two cameras there, one of its positions at them 60 mm off at under half
+    # of that as its std; every other detection's point is the track's
     options = FusionOptions()
     gated = gate_for(detections, rig, "smooth", options)
     prep = prepared_for(gated, rig) if gated.doubt_px2 is not None else prepare(
         gated.observations, rig)
     fit, obs, _ = session_fit(prep, rig, replace(options, max_gap_s=default_max_gap_s(rig)))
+    breaks = fit.trajectory.breaks_s + fit.trajectory.t0_ns / 1e9
+    assert np.min(np.abs(breaks - 6.7384)) > 0.1
     rows = np.flatnonzero(fit.used & fit.rejected)
     times = obs.time_ns[rows] / 1e9
-    run = rows[(times > 2.612) & (times < 2.632)]
-    assert len(run) == 4 and len(np.unique(obs.camera[run])) == 2
+    run = rows[(times > 6.6834) & (times < 6.7666)]
+    assert len(run) == 3 and len(np.unique(obs.camera[run])) == 2
     err_fit = np.linalg.norm(fit.position[run] - truth.at(obs.time_ns[run]), axis=1)
     assert err_fit.max() > 0.05
     std_fit = np.sqrt(np.einsum("nii->n", fit.covariance[run]))
-    assert std_fit.max() < 0.01  # the fit's covariance did not say so
+    assert std_fit[np.argmax(err_fit)] < err_fit.max() / 2  # the fit's covariance did not say so
     keep = fit.used & np.all(np.isfinite(fit.position), axis=1)
     keep[run] = False
     np.testing.assert_array_equal(obs.time_ns[keep], track.time_ns)
@@ -116,11 +138,10 @@ def test_no_point_where_two_cameras_contradict_the_fit(session):
 
 
 def test_the_grid_leaves_the_span_out_too(session):
-    rig, detections, truth, _ = session
+    rig, detections, _, _ = session
     track = fuse_detections(detections, rig, ["smooth"],
                             FusionOptions(rate_hz=1000.0))[0]["smooth"]
     t = track.time_ns / 1e9
     # the span runs from the fitted detection before the run to the one after it
-    assert not np.any((t > 2.6112) & (t < 2.6333))
+    assert not np.any((t > 6.6834) & (t < 6.7666))
     assert track.dropped["contradicted_run"] >= 20
-    assert np.nanmax(errors_m(track, truth)) < 0.05

@@ -224,6 +224,12 @@ _BREAK_ROUNDS = 3
 #: two refined breaks this many knot spacings apart or less are tested against one
 #: (:func:`_two_against_one`)
 _CLOSE_SPANS = 2.0
+#: the grid of the pairs tested against one break (:func:`_one_against_two`): steps per
+#: knot spacing
+_ONE_GRID = 4
+#: then the best pair's stages of 3 x 3 trials around it, each step half the last's (to
+#: h/64)
+_ONE_POLISH = 4
 #: Gauss–Newton iterations of the first loose fit, of the next rounds' (from the previous
 #: fit, refitted to the new knots: the refit is their one iteration since session 23,
 #: :func:`_refit_linearised`), and of the fit under the real prior at which the breaks'
@@ -1018,6 +1024,14 @@ def _fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions,
         # two close breaks tested against one in their place
         breaks = _two_against_one(problem, control, sigma, r, w, J, spacing, breaks, options,
                                   terms=terms)
+        # and each break the fit bends around tested against two in its place; a pair put
+        # there is tested against one as any (the best one may lie elsewhere than the break
+        # it replaced: then it stays one, there)
+        paired = _one_against_two(problem, control, sigma, r, w, J, spacing, breaks,
+                                  options, terms=terms)
+        if paired is not breaks:
+            breaks = _two_against_one(problem, control, sigma, r, w, J, spacing, paired,
+                                      options, terms=terms)
         # each break kept only where it pays its way under the real prior too
         breaks = _confirmed_breaks(problem, control, sigma, r, w, J, spacing, breaks,
                                    options, terms=terms)
@@ -1573,22 +1587,11 @@ def _find_breaks(problem: _Problem, control: np.ndarray, sigma: float, r: np.nda
     round added, only peaks within reach of their local problems: a peak further away sees
     the same local fit as in that round, which rejected it): the peaks of ``‖p'' - g‖`` above
     ``break_accel``, each kept if a break near it gains more than ``break_threshold``."""
-    g = np.asarray(options.prior.gravity)
     X = problem.positions_known(control)
     target = _linear_target(J, X, r)  # the linearised measurements
     weight = w / sigma**2
     t_obs = problem.t[problem.rows]
-    # ‖p'' - g‖ at every span's midpoint of every piece, in one pass (the second
-    # derivative's basis alone, and its sums in one compiled pass: the bits of every
-    # derivative's basis and numpy's einsum over its row, which they replaced in session 24)
-    mids = [((k[:-1] + k[1:]) / 2)[k[1:] > k[:-1]] for k in problem.knots]
-    piece = np.repeat(np.arange(len(mids)), [len(x) for x in mids])
-    from ._kernels import points_positions
-
-    first, N2 = basis_pieces(problem.knots, piece, np.concatenate(mids), only=2)
-    accel = points_positions(np.ascontiguousarray(first, dtype=np.int64), N2,
-                             np.ascontiguousarray(control, dtype=np.float64))
-    devs = np.split(np.linalg.norm(accel - g, axis=1), np.cumsum([len(x) for x in mids])[:-1])
+    mids, devs = _span_deviations(problem, control, options)
     jobs = []
     row0 = 0
     for p, dev in enumerate(devs):
@@ -1627,6 +1630,26 @@ def _find_breaks(problem: _Problem, control: np.ndarray, sigma: float, r: np.nda
         free = _free_of(tau, known[p], spacing)
         out[p] = _greedy_breaks(tau, gain, free, options.break_threshold, 1.5 * spacing)
     return out
+
+
+def _span_deviations(problem: _Problem, control: np.ndarray, options: SmoothOptions
+                     ) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """Per piece, every span's midpoint (s) and ``‖p'' - g‖`` there (m/s²) of the fit
+    ``control`` on ``problem``'s knots: the find's peaks (:func:`_find_breaks`) and the
+    screen of :func:`_one_against_two`."""
+    g = np.asarray(options.prior.gravity)
+    # ‖p'' - g‖ at every span's midpoint of every piece, in one pass (the second
+    # derivative's basis alone, and its sums in one compiled pass: the bits of every
+    # derivative's basis and numpy's einsum over its row, which they replaced in session 24)
+    mids = [((k[:-1] + k[1:]) / 2)[k[1:] > k[:-1]] for k in problem.knots]
+    piece = np.repeat(np.arange(len(mids)), [len(x) for x in mids])
+    from ._kernels import points_positions
+
+    first, N2 = basis_pieces(problem.knots, piece, np.concatenate(mids), only=2)
+    accel = points_positions(np.ascontiguousarray(first, dtype=np.int64), N2,
+                             np.ascontiguousarray(control, dtype=np.float64))
+    devs = np.split(np.linalg.norm(accel - g, axis=1), np.cumsum([len(x) for x in mids])[:-1])
+    return mids, devs
 
 
 def _free_bounds(a: np.ndarray, b: np.ndarray, side: np.ndarray, spacing: float
@@ -2096,6 +2119,126 @@ def _two_against_one(problem: _Problem, control: np.ndarray, sigma: float, r: np
         if one:
             out[p] = np.sort(np.r_[known[keep], one])
     return out
+
+
+def _one_against_two(problem: _Problem, control: np.ndarray, sigma: float, r: np.ndarray,
+                     w: np.ndarray, J: np.ndarray, spacing: float, breaks: list[np.ndarray],
+                     options: SmoothOptions, terms: tuple | None = None
+                     ) -> list[np.ndarray]:
+    """The refined ``breaks`` with each one tested against two breaks in its place (the
+    converse of :func:`_two_against_one`): pairs ``τ₁ ≤ b ≤ τ₂`` around the break ``b``,
+    more than a knot spacing and at most ``_CLOSE_SPANS`` spacings apart, on a grid of
+    ``h/_ONE_GRID``, each more than a spacing from the breaks beside ``b`` and within the
+    piece's end limits (:func:`_end_limits`); every pair's least cost and the one's on the
+    same detections with every near break in the model (:func:`_region_costs`, as
+    :func:`_two_against_one`). The best pair replaces ``b`` where its second break gains more
+    than ``break_threshold`` over the one (σ² units: the threshold every break must pass, and
+    the one :func:`_two_against_one` merges a pair below, so the two rules cannot undo each
+    other), its instants polished in the same context (``_ONE_POLISH`` stages of 3 x 3
+    trials, to h/64: the refine moves one break with its neighbour held, and of two breaks
+    with a gap of detections between them either is free anywhere in it). Only the breaks
+    the fit bends around are tested: a span midpoint within ``_CLOSE_SPANS`` spacings of
+    ``b`` where ``‖p'' - g‖`` of the fit exceeds ``break_accel`` (the find's peak level,
+    :func:`_span_deviations`); of breaks side by side, the one whose pair gains most.
+
+    Session 46: two kicks 80 ms apart (``paper3`` rally 74069 with misses, cut to
+    2.49-3.77 s, h 49.85 ms; kicks 3.0873 and 3.1673 s): the loose fit's first break sat
+    between them (3.1311), within a spacing of both, so the find could search no second;
+    the refine moved it onto the later kick, and the earlier (1.6 spacings before it) had
+    no break: points to 83 mm. The pair gains 204 σ² over the one there."""
+    span = _CLOSE_SPANS * spacing
+    mids, devs = _span_deviations(problem, control, options)
+    hot = []
+    for known, m, d in zip(breaks, mids, devs, strict=True):
+        peaks = m[d > options.break_accel]
+        hot.append(_nearest_distance(known, peaks) < span if len(known) and len(peaks)
+                   else np.zeros(len(known), dtype=bool))
+    if not any(np.any(h) for h in hot):  # (nearly every break: no rows formed)
+        return breaks
+    reach = _WINDOW_SPANS * spacing
+    t_obs = problem.t[problem.rows]
+    X = problem.positions_known(control)
+    steps = np.arange(int(_ONE_GRID * _CLOSE_SPANS) + 1)
+    back, ahead = (a.ravel() for a in np.meshgrid(steps, steps, indexing="ij"))
+    apart = ((back + ahead) > _ONE_GRID) & ((back + ahead) <= _CLOSE_SPANS * _ONE_GRID)
+    before, after = back[apart] * spacing / _ONE_GRID, ahead[apart] * spacing / _ONE_GRID
+    # the polishing trials: the 8 neighbours of the best pair on a grid of its step
+    d1, d2 = (a.ravel() for a in np.meshgrid([-1.0, 0.0, 1.0], [-1.0, 0.0, 1.0],
+                                             indexing="ij"))
+    d1, d2 = d1[(d1 != 0) | (d2 != 0)], d2[(d1 != 0) | (d2 != 0)]
+    found = []  # (the pair's second break's gain over the one, piece, index, pair)
+    for p, here, known, first_ok, last_ok, _ in _pieces_with_breaks(problem, t_obs, [
+            b if np.any(h) else b[:0] for b, h in zip(breaks, hot, strict=True)]):
+        t_here = t_obs[here]
+        for i in np.flatnonzero(hot[p]):
+            one = float(known[i])
+            # the pairs may lie more than a spacing from the breaks beside the one (as
+            # :func:`_free_of`), and inside the piece's end limits
+            side = (float(known[i - 1]) + spacing * (1 - 1e-9) if i > 0 else -np.inf,
+                    float(known[i + 1]) - spacing * (1 - 1e-9) if i + 1 < len(known)
+                    else np.inf)
+            bounds = (max(side[0], first_ok), min(side[1], last_ok))
+            near = known[(known > one - span - reach) & (known < one + span + reach)]
+            region = (min(one - span, float(near.min())) - reach,
+                      max(one + span, float(near.max())) + reach)
+            t1, t2 = one - before, one + after
+            ok = (t1 >= bounds[0]) & (t2 <= bounds[1])
+            if not np.any(ok):
+                continue
+            cost = _pair_costs(problem, X, r, J, w, sigma, spacing, here, t_here, region,
+                               known, one, t1[ok], t2[ok])
+            if cost is None:
+                continue
+            best = int(np.argmin(cost[1:]))
+            if cost[0] - cost[1 + best] <= options.break_threshold:
+                continue
+            # the pair's instants polished in the same context: 3 x 3 trials around the
+            # best, each stage's step half the last's, to h/64 (the refine moves one break
+            # with its neighbour held, and of two breaks with a gap of detections between
+            # them either is free anywhere in it: it cannot place them)
+            pair, least = (float(t1[ok][best]), float(t2[ok][best])), cost[1 + best]
+            step = spacing / _ONE_GRID
+            for _ in range(_ONE_POLISH):
+                step /= 2
+                u1, u2 = pair[0] + step * d1, pair[1] + step * d2
+                fine = ((u2 - u1 > spacing * (1 + 1e-9)) & (u2 - u1 <= span * (1 + 1e-9))
+                        & (u1 >= bounds[0]) & (u2 <= bounds[1]))
+                trial = _pair_costs(problem, X, r, J, w, sigma, spacing, here, t_here,
+                                    region, known, one, u1[fine], u2[fine]
+                                    ) if np.any(fine) else None
+                if trial is not None and min(trial[1:]) < least:
+                    at = int(np.argmin(trial[1:]))
+                    pair, least = (float(u1[fine][at]), float(u2[fine][at])), trial[1 + at]
+            found.append((cost[0] - least, p, int(i), pair))
+    if not found:
+        return breaks
+    # of breaks side by side, the one whose pair gains most (each pair was kept a spacing
+    # from the breaks beside its one, which stay)
+    out = [np.asarray(x, dtype=np.float64) for x in breaks]
+    used = [np.zeros(len(b), dtype=bool) for b in breaks]
+    gone: dict[int, list[tuple[int, tuple[float, float]]]] = {}
+    for _, p, at, pair in sorted(found, key=lambda f: -f[0]):
+        if used[p][max(at - 1, 0):at + 2].any():
+            continue
+        used[p][at] = True
+        gone.setdefault(p, []).append((at, pair))
+    for p, items in gone.items():
+        out[p] = np.sort(np.r_[np.delete(out[p], [at for at, _ in items]),
+                               [t for _, pair in items for t in pair]])
+    return out
+
+
+def _pair_costs(problem: _Problem, X: np.ndarray, r: np.ndarray, J: np.ndarray,
+                w: np.ndarray, sigma: float, spacing: float, here: np.ndarray,
+                t_here: np.ndarray, region: tuple[float, float], known: np.ndarray,
+                one: float, t1: np.ndarray, t2: np.ndarray) -> list[float] | None:
+    """:func:`_region_costs` over ``region`` of the break ``one`` (of ``known``, s) as it
+    is, then of each pair ``t1``, ``t2`` (P,) in its place (:func:`_one_against_two`): P + 1
+    least costs (σ² units), or None."""
+    drop = np.array([one])
+    return _region_costs(problem, X, r, J, w, sigma, spacing, here, t_here, region[0],
+                         region[1], known, [(np.zeros(0), np.zeros(0))] + [
+                             (drop, np.array([a, b])) for a, b in zip(t1, t2, strict=True)])
 
 
 def _gain_in_context(problem: _Problem, X: np.ndarray, r: np.ndarray, J: np.ndarray,
