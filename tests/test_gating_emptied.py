@@ -96,3 +96,9 @@ def test_a_choice_made_again_when_an_unforeseen_frame_is_emptied(seed, monkeypat
     again, _ = decided(det, rig, False, causal=False)
     assert len(passes) >= 2  # (the choice was made again)
     assert_array_equal(again, reason)
+    # the bound on the passes: beyond it every frame is foreseen, and that pass is the last
+    passes.clear()
+    monkeypatch.setattr(gating, "_MAX_PASSES", 0)
+    bounded, _ = decided(det, rig, False, causal=False)
+    assert len(passes) == 1
+    assert_array_equal(bounded, reason)

@@ -63,6 +63,7 @@ tolerance) and from its own earlier decisions, so a causal method fed by it stay
 from __future__ import annotations
 
 import functools
+import itertools
 import math
 import sys
 import threading
@@ -546,6 +547,12 @@ def _support(c: _Candidates, rig: Rig, F: np.ndarray, tables, options: GatingOpt
 #: False: :func:`_decide_in_order` foresees no frame that may be emptied (:func:`_emptied`),
 #: so every one emptied makes the choice again (tests check the same choices come out)
 FORESEE_EMPTIED = True
+
+#: choices :func:`_decide_in_order` makes again for frames emptied that it did not foresee
+#: before it foresees every frame (then the next pass is the last: a bound; on dirty
+#: sessions it foresees them all in one pass, and with none foreseen (``FORESEE_EMPTIED``
+#: False) two passes or three found them)
+_MAX_PASSES = 3
 
 #: frames that may be emptied (:func:`_emptied`) up to which :func:`_decide_pass` marks
 #: the frames whose support used one span by span (beyond, over every frame at once)
@@ -1994,7 +2001,10 @@ def _decide_in_order(c: _Candidates, rig: Rig, options: GatingOptions, frames, t
             empty[position[lo_all[left[frame_cam[left] == b]]]] = True
             may_empty.append(empty)
     saved: dict[int, tuple] = {}  # a redone row's array values, for a choice made again
-    while True:
+    for passes in itertools.count(1):
+        if passes > _MAX_PASSES:  # every frame foreseen: this pass is the last
+            for empty in may_empty:
+                empty[:] = True
         again = _decide_pass(c, rig, options, tables, F, support, geometry, still, reason,
                              causal, wait_ns, max_gap_ns, constants, may_empty, saved,
                              (lo_all, hi_all, single, whole, position, frame_camera,
