@@ -2175,8 +2175,12 @@ def _decide_pass(c: _Candidates, rig: Rig, options: GatingOptions, tables, F, su
                         line = _line_of(F_lists[a][b], *und_i)
                         r, uv = _support_one(t_i, line, keys(b), usable_of(b), search, wait_ns,
                                              causal, max_gap_ns, options)
-                        if any(j in emptied[b] for j in used[i, b].tolist()):
-                            # the better of the two carries (_emptied)
+                        if any(j in emptied[b] and abs(t_i - keys(b)[j]) <= max_gap_ns
+                               for j in used[i, b].tolist()):
+                            # the better of the two carries (_emptied), where a frame
+                            # emptied lies within the gap (as decide_at: one beyond it
+                            # carried nothing, yet skipped it may turn the single frame
+                            # before t into an extrapolation from two)
                             r2, uv2 = _support_one(t_i, line, keys(b), usable_of(b, True),
                                                    search, wait_ns, causal, max_gap_ns,
                                                    options)
