@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from _rally import dirty_rally, rally
+from _rigs import ring_rig
 from numpy.testing import assert_array_equal
 from test_gate_whole import DISTRACTOR, assert_same, decided, session
 
@@ -179,3 +180,53 @@ def test_an_emptied_frame_beyond_the_gap_changes_neither_deciders_support():
     assert_array_equal(whole, python)
     assert_array_equal(r_whole, r_python)
     assert r_python[i, 1] == r  # the carry with the frame: it lies beyond the gap
+
+
+@pytest.mark.parametrize("few_spans", [gating._FEW_SPANS, 0], ids=["spans", "cover"])
+def test_a_frame_emptied_before_a_cameras_last_is_foreseen(few_spans, monkeypatch):
+    """Review46: the Python decider marks for its own decision every frame whose support
+    looked at a frame that may be emptied (``_decide_pass``: a frame of one candidate at t
+    looked at b's frame j where ``keys[j - 1] <= t < keys[j + 2]``, span by span or, beyond
+    ``_FEW_SPANS`` such frames, by a cover count). At camera 1's last frame (the session's
+    end for it) a later frame of camera 0 extrapolates camera 1's support from its last two
+    frames; where the one before the last held the static object alone (emptied), the skip
+    extrapolates from the two frames around it. Only the span's upper end (``j + 2``: the
+    frame two before t's latest) marks camera 0's frame there (four cameras: every other
+    frame near it taken whole); both ways of marking, as the compiled decider."""
+    ring = ring_rig(4, "ring4")
+    rig = Rig(tuple(c.replace(fps=60.0, offset=i / (4 * 60.0))
+                    for i, c in enumerate(ring.cameras)), ring.name)
+    options = SimulationOptions(noise_px=0.3, seed=82950,
+                                distractors=((rig.names[1], DISTRACTOR),))
+    det, _, ball = simulate_labelled(rig, rally(2.0, seed=82950, speed=5.0,
+                                                kick_every_s=0.7)[0], 2.0, options)
+    rig = true_rig(rig, options)
+    is_ball = ball_mask(det, ball)
+    _, tables = gating.gate_common(det, rig)
+    keys1, rows1 = tables[1]
+    two = (rows1 >= 0).sum(axis=1) == 2  # (the ball and the static object)
+    last = max(j for j in range(2, len(keys1))
+               if keys1[j] < 1.5e9 and two[j] and two[j - 1] and two[j - 2])
+    # camera 1's frames end at `last` (the ball alone); the one before: the object alone
+    drop = np.zeros(det.n_candidates, dtype=bool)
+    drop[rows1[last + 1:][rows1[last + 1:] >= 0]] = True
+    drop[rows1[last - 1][is_ball[rows1[last - 1]]]] = True
+    drop[rows1[last][~is_ball[rows1[last]]]] = True
+    keep = ~drop
+    faulted = dataclasses.replace(det, cand_uv=det.cand_uv[keep],
+                                  cand_frame=det.cand_frame[keep],
+                                  cand_score=det.cand_score[keep],
+                                  cand_radius=det.cand_radius[keep])
+    monkeypatch.setattr(gating, "_FEW_SPANS", few_spans)
+    python, r_python = decided(faulted, rig, False, False)
+    whole, r_whole = decided(faulted, rig, True, False)
+    c2, tables2 = gating.gate_common(faulted, rig)
+    keys, rows = tables2[1][0], tables2[1][1]
+    assert python[rows[-2][rows[-2] >= 0]].tolist() == [gating.MOTION]  # (emptied: static)
+    after = np.flatnonzero((c2.camera == 0) & (c2.time_ns >= keys[-1]))[0]
+    assert np.isinf(gating._support(c2, rig, gating.fundamental_matrices(rig.cameras),
+                                    tables2, gating.GatingOptions(), round(3.5 / 60 * 1e9),
+                                    False, 0)[0][after, 1])  # (the carry with it: none)
+    assert r_python[after, 1] < 0.1  # the carry without it
+    assert_array_equal(whole, python)
+    assert_array_equal(r_whole, r_python)
