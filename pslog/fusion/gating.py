@@ -1808,6 +1808,16 @@ WHOLE_MAX_BYTES = 1 << 30
 #: candidate that two other cameras support (taken in arrays), one candidate otherwise,
 #: several candidates
 _PYTHON_S = (1.1e-6, 12e-6, 150e-6)
+#: the Python path's further cost per frame of several candidates, s: the frames whose
+#: support used it are decided one by one (and redone where it was decided with a
+#: rejected candidate, or offline emptied: :func:`_decide_pass`); the 90-minute session
+#: with 0.1-0.5 % of frames given a blob (and 0-2 % of candidates dropped), 0.4-0.6 ms each
+#: (``benchmarks/session46/review46_s90_blobs.py``)
+_PYTHON_NEAR_S = 5e-4
+#: the compiled whole-session choice's cost per frame, s, every step included (its support,
+#: points and stillness too): the 90-minute session, clean or with blobs, 1.0-1.12 s for
+#: 480,000 frames; where the Python path's estimate is more, the compiled one is taken
+_COMPILED_S = 2.2e-6
 #: the Python path's cost per candidate and candidate pair of its crowdest frames, s
 #: (:func:`_decide_compiled`: candidates × k_max², k_max the most candidates a frame holds;
 #: hostile40, 720 frames of a rally: 10, 20, 50 candidates a frame 0.53, 2.0, 30 CPU s and
@@ -1824,20 +1834,23 @@ def _decide_compiled(c: _Candidates, starts: np.ndarray, ends: np.ndarray, table
     (the same choices: the same steps on the same bits; ``tests/test_gate_whole.py``), and
     the Python decider's estimated CPU seconds.
 
-    The compiled kernels decide each frame whole: ~1.7 µs a frame (a clean 90-minute match,
-    three cameras, the geometry included). The Python path takes in arrays a frame of one
-    candidate that two other cameras support (~1.1 µs), but decides any other in Python:
-    ~12 µs a frame of one candidate (one other camera near: misses, drops, a two-camera
-    rig), ~150 µs one of several (a static object, blobs) (:data:`_PYTHON_S`). So the
-    compiled kernels wherever at least :data:`WHOLE_FROM_SHARE` of the frames are not of the
-    first kind (judged by the frames' times alone: one candidate, and a frame of two other
-    cameras within the gate's gap; on up to :data:`_WHOLE_SAMPLE` evenly spaced frames), or
-    where crowded frames would cost the Python path :data:`WHOLE_LOAD_S` or more (its
-    support pairs each candidate with every pair of another camera's frames around it:
-    :data:`_PYTHON_PAIR_S` a candidate and pair of the crowdest frame's candidates; 50
-    candidates a frame took 30 s and 3.3 GB there, 209 in one camera asked for 16 GiB), and
-    the state holding every frame stays below :data:`WHOLE_MAX_BYTES`. Imports nothing (the
-    caller loads the kernels only where they are worth it)."""
+    The compiled kernels decide each frame whole: ~2.2 µs a frame (:data:`_COMPILED_S`, a
+    90-minute match, three cameras, the geometry included). The Python path takes in arrays
+    a frame of one candidate that two other cameras support (~1.1 µs), but decides any other
+    in Python: ~12 µs a frame of one candidate (one other camera near: misses, drops, a
+    two-camera rig), ~150 µs one of several (a static object, blobs) (:data:`_PYTHON_S`),
+    and ~0.5 ms more for the frames around one of several (:data:`_PYTHON_NEAR_S`). So the
+    compiled kernels where that estimate is the larger (a 90-minute match with a blob in
+    0.2 % of its frames: 1.19 against 1.11 CPU s; 0.5 %: 1.94 against 1.10), and wherever
+    at least :data:`WHOLE_FROM_SHARE` of the frames are not of the first kind (judged by the
+    frames' times alone: one candidate, and a frame of two other cameras within the gate's gap;
+    on up to :data:`_WHOLE_SAMPLE` evenly spaced frames), or where crowded frames would cost the
+    Python path :data:`WHOLE_LOAD_S` or more (its support pairs each candidate with every pair
+    of another camera's frames around it: :data:`_PYTHON_PAIR_S` a candidate and pair of the
+    crowdest frame's candidates; 50 candidates a frame took 30 s and 3.3 GB there, 209 in one
+    camera asked for 16 GiB), and the state holding every frame stays below
+    :data:`WHOLE_MAX_BYTES`. Imports nothing (the caller loads the kernels only where they
+    are worth it)."""
     n_frames = len(starts)
     if n_frames == 0:
         return False, 0.0
@@ -1868,12 +1881,14 @@ def _decide_compiled(c: _Candidates, starts: np.ndarray, ends: np.ndarray, table
     # the Python decider)
     crowd_s = (len(c.camera) * k_max**2 * _PYTHON_PAIR_S
                if k_max >= 2 and len(c.camera) < _KERNELS_FROM else 0.0)
-    python_s = float(n_frames * (shares @ np.array(_PYTHON_S))) + crowd_s
+    python_s = (float(n_frames * (shares @ np.array(_PYTHON_S))) + crowd_s
+                + float(n_frames * shares[2]) * _PYTHON_NEAR_S)
     if WHOLE_COMPILED is not None:
         return WHOLE_COMPILED, python_s
     if _whole_bytes(len(tables), h_max, k_max, len(c.camera)) > WHOLE_MAX_BYTES:
         return False, python_s
-    return bool(shares[1] + shares[2] >= WHOLE_FROM_SHARE or crowd_s >= WHOLE_LOAD_S), python_s
+    return bool(shares[1] + shares[2] >= WHOLE_FROM_SHARE or crowd_s >= WHOLE_LOAD_S
+                or python_s >= n_frames * _COMPILED_S), python_s
 
 
 def _whole_bytes(m: int, h_max: int, k_max: int, n: int) -> int:
