@@ -107,6 +107,16 @@ def test_a_choice_made_again_when_an_unforeseen_frame_is_emptied(seed, monkeypat
     assert_array_equal(bounded, reason)
 
 
+def _static_object_rally(rig: Rig, seed: int, speed: float, **faults):
+    """A 2-s rally at ``speed`` m/s seen by ``rig`` (0.3 px) with the static object in its
+    second camera's view: (detections, the true rig, which candidates are the ball)."""
+    options = SimulationOptions(noise_px=0.3, seed=seed,
+                                distractors=((rig.names[1], DISTRACTOR),), **faults)
+    det, _, ball = simulate_labelled(rig, rally(2.0, seed=seed, speed=speed,
+                                                kick_every_s=0.7)[0], 2.0, options)
+    return det, true_rig(rig, options), ball_mask(det, ball)
+
+
 def _usable(c, table, skip: bool):
     """gating._support_one's ``usable`` over camera b's frames ``table``: every candidate,
     the last frame none where ``skip``."""
@@ -129,12 +139,8 @@ def test_an_emptied_frame_beyond_the_gap_changes_neither_deciders_support():
     cams = list(rig.cameras)
     cams[1] = cams[1].replace(fps=120.0, offset=0.004)
     rig = Rig(tuple(cams), rig.name)
-    options = SimulationOptions(noise_px=0.3, seed=82900, readout_s={rig.names[0]: readout},
-                                distractors=((rig.names[1], DISTRACTOR),))
-    det, _, ball = simulate_labelled(rig, rally(2.0, seed=82900, speed=8.0,
-                                                kick_every_s=0.7)[0], 2.0, options)
-    rig = true_rig(rig, options)
-    is_ball = ball_mask(det, ball)
+    det, rig, is_ball = _static_object_rally(rig, 82900, 8.0,
+                                             readout_s={rig.names[0]: readout})
     c, tables = gating.gate_common(det, rig)
     keys1, rows1 = tables[1]
     height, gap = rig.cameras[0].height, round(gap_s * 1e9)
@@ -202,12 +208,7 @@ def test_a_frame_emptied_before_a_cameras_last_is_foreseen(few_spans, monkeypatc
     ring = ring_rig(4, "ring4")
     rig = Rig(tuple(c.replace(fps=60.0, offset=i / (4 * 60.0))
                     for i, c in enumerate(ring.cameras)), ring.name)
-    options = SimulationOptions(noise_px=0.3, seed=82950,
-                                distractors=((rig.names[1], DISTRACTOR),))
-    det, _, ball = simulate_labelled(rig, rally(2.0, seed=82950, speed=5.0,
-                                                kick_every_s=0.7)[0], 2.0, options)
-    rig = true_rig(rig, options)
-    is_ball = ball_mask(det, ball)
+    det, rig, is_ball = _static_object_rally(rig, 82950, 5.0)
     _, tables = gating.gate_common(det, rig)
     keys1, rows1 = tables[1]
     two = (rows1 >= 0).sum(axis=1) == 2  # (the ball and the static object)
