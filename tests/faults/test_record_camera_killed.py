@@ -77,6 +77,8 @@ class Recording:
                                      stdin=subprocess.DEVNULL, text=True,
                                      start_new_session=True)
         self.lines: list[str] = []
+        #: camera -> its process's bytes read when first seen with its file open
+        self.read_at_open: dict[str, int] = {}
         self._reader = threading.Thread(target=self._read, daemon=True)
         self._reader.start()
         self.stdout = ""
@@ -101,8 +103,9 @@ class Recording:
             ended = self.proc.poll() is not None
             for pid in _children(self.proc.pid):
                 name = _camera_of(pid, self.files)
-                if name is not None:
-                    found.setdefault(name, pid)
+                if name is not None and name not in found:
+                    found[name] = pid
+                    self.read_at_open[name] = _bytes_read(pid)
             if len(found) == len(self.files):
                 return found
             if ended:
@@ -264,7 +267,13 @@ def _kill_mid_clip(rec: Recording, victim: str, after_s: float) -> tuple[float, 
         return 1.0, False
     deadline = time.monotonic() + after_s
     size = rec.files[victim].stat().st_size
-    start = _bytes_read(pids[victim])
+    # (counted from when its file was first seen open, not from now: the last camera may
+    # open its file late, the victim far into its clip by then, and a share counted from
+    # here let it end before the kill, three attempts running on a quiet machine: CI,
+    # session 46)
+    start = rec.read_at_open.get(victim, -1)
+    if start < 0:
+        start = _bytes_read(pids[victim])
 
     def read_share() -> float:  # of its clip, since its file was open
         now = _bytes_read(pids[victim])
