@@ -402,6 +402,12 @@ class _Session:
             self.started_at = time.monotonic()
             if not interrupted.is_set():  # else the cameras were still starting
                 self.board.session_started = self.started_at
+            else:
+                # stopped while the cameras were starting: the stop before the start, so a
+                # camera released by the start finds it and reads no frame (set after, one
+                # ready camera could deliver a frame first: a one-frame session kept)
+                self.stop_reason, self.stopped = f"stopped by {interrupted.name}", True
+                stop.set()
             start.set()
             if not interrupted.is_set():
                 # relates the session clock to the host's monotonic clock (and UTC)
