@@ -7,7 +7,8 @@ another camera: withdrawn (``Track.dropped["held"]``) if that detection made a j
 before it (the jump's lag reaches back to it) or that may be (since session 31, the jump's
 hypotheses reaching back to it carry a posterior probability of at least ``hold_jump_p``:
 tests/test_filter_hold_jump.py), was rejected, or the track was lost first (or none came);
-else output. Checked against the rule written out in Python over every point
+else output. Since session 47 a start's point (``init``) is held so too
+(``hold_start``). Checked against the rule written out in Python over every point
 of the same detections streamed (``withhold=False``, each jump's lag read), and on a flight
 kicked along a camera's ray, whose first point after the kick is 8.6 cm off.
 """
@@ -48,7 +49,8 @@ def _withdrawn_by_rule(obs, rig, options, theta):
     p_min = 2.0 if options.hold_jump_p is None else options.hold_jump_p
     gone = set()
     for i, (t, c, nis, jump, rej, init, _, shown) in enumerate(rows):
-        if not shown or not nis > theta or jump or rej or init:
+        # (a start's point, its NIS NaN, is held too: hold_start, session 47)
+        if not shown or jump or rej or not (nis > theta or (init and options.hold_start)):
             continue
         verdict, between = True, 0  # withdrawn unless another camera's point releases it
         for _t2, c2, _, jump2, rej2, init2, (lag2, w2), _ in rows[i + 1:]:
