@@ -771,7 +771,9 @@ def test_streaming_equals_batch_exactly_with_misses_drops_and_outliers(clock, tu
         # the next camera (session 30), with a later one's, the one that decides it
         own = [np.count_nonzero(p.time_ns == logged.time_ns[i]) for i, p in enumerate(parts[:-1])]
         assert all(np.all(p.time_ns <= logged.time_ns[i]) for i, p in enumerate(parts[:-1]))
-        assert 0 < len(batch) - sum(own) < 0.5 * len(batch)  # (some left late)
+        # (some left late; with 30 % misses most points follow a missed slot, held since
+        # session 47: hold_gap)
+        assert 0 < len(batch) - sum(own) < 0.8 * len(batch)
 
 
 def test_the_stream_exposes_the_filter_for_prediction_to_now():

@@ -7,14 +7,17 @@ another camera: withdrawn (``Track.dropped["held"]``) if that detection made a j
 before it (the jump's lag reaches back to it) or that may be (since session 31, the jump's
 hypotheses reaching back to it carry a posterior probability of at least ``hold_jump_p``:
 tests/test_filter_hold_jump.py), was rejected, or the track was lost first (or none came);
-else output. Since session 47 a start's point (``init``) is held so too
-(``hold_start``). Checked against the rule written out in Python over every point
+else output. Since session 47 a start's point (``init``: ``hold_start``), a plain update's
+after a gap of more than 1.5 staggers (``hold_gap``) and a rejected detection's (the
+prediction: ``hold_rejected``; withdrawn by any jump since the accepted detection before it)
+are held too. Checked against the rule written out in Python over every point
 of the same detections streamed (``withhold=False``, each jump's lag read), and on a flight
 kicked along a camera's ray, whose first point after the kick is 8.6 cm off.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 
 import numpy as np
@@ -45,15 +48,28 @@ def _withdrawn_by_rule(obs, rig, options, theta):
         lag = int(flt._I[FM._IJLAG]) if q[8] == 1.0 else -1
         # (session 31) each lag's posterior probability at a jump
         w = flt._S[FM._SJLW:FM._SJLW + FM._HISTORY].copy()
-        rows.append((t, c, q[6], q[8], q[9], q[10], (lag, w), shown is not None))
+        rows.append((t, c, q[6], q[7], q[8], q[9], q[10], (lag, w), shown is not None))
     p_min = 2.0 if options.hold_jump_p is None else options.hold_jump_p
+    # (session 47) a plain point after a gap of more than hold_gap staggers, a start's and a
+    # rejected detection's are held too
+    gap_max = (math.inf if options.hold_gap is None
+               else options.hold_gap / sum(c.fps for c in rig.cameras))
     gone = set()
-    for i, (t, c, nis, jump, rej, init, _, shown) in enumerate(rows):
-        # (a start's point, its NIS NaN, is held too: hold_start, session 47)
-        if not shown or jump or rej or not (nis > theta or (init and options.hold_start)):
+    for i, (t, c, nis, gap, jump, rej, init, _, shown) in enumerate(rows):
+        if not shown or jump:
             continue
-        verdict, between = True, 0  # withdrawn unless another camera's point releases it
-        for _t2, c2, _, jump2, rej2, init2, (lag2, w2), _ in rows[i + 1:]:
+        if rej:
+            held = options.hold_rejected
+        elif init:  # (its NIS and gap NaN)
+            held = options.hold_start
+        else:
+            held = nis > theta or gap > gap_max
+        if not held:
+            continue
+        # withdrawn unless another camera's point releases it; a rejected detection is not
+        # among the jump's lags: any jump since the accepted detection before it withdraws it
+        verdict, between = True, -1 if rej else 0
+        for _t2, c2, _, _, jump2, rej2, init2, (lag2, w2), _ in rows[i + 1:]:
             if init2:
                 break
             if c2 != c:

@@ -126,7 +126,7 @@ def test_predict_across_a_gap_carries_the_jumps_it_may_hide_by_hand():
     assert flt.state()[0] == t0 and np.array_equal(flt.state()[2], ref.state()[2])
 
 
-def _unseen_kick(rate: float, withhold: bool):
+def _unseen_kick(rate: float, withhold: bool, holds: bool = True):
     """A flight seen by three cameras, kicked (4 m/s towards camera 1) just after every
     camera loses it (the ball leaves their views, as in session 23's lab4 rally-3000); 100 ms
     after the filter's last accepted detection a spurious blob in camera 2 gives it a time:
@@ -148,8 +148,11 @@ def _unseen_kick(rate: float, withhold: bool):
     blob = corners[np.argmax(np.linalg.norm(corners - ball, axis=1))]
     obs = Observations(np.append(obs.time_ns, t), np.append(obs.camera, 1),
                        np.vstack([obs.uv, blob]), np.append(obs.frame_index, -1))
-    track = fuse_filter(obs, rig, options=FilterOptions(jump_rate_per_s=rate,
-                                                        withhold=withhold))
+    # (holds False: without session 47's hold of a rejected detection's point and of one
+    # after a missed slot)
+    track = fuse_filter(obs, rig, options=FilterOptions(
+        jump_rate_per_s=rate, withhold=withhold, hold_gap=1.5 if holds else None,
+        hold_rejected=holds))
     return track, errors_m(track, truth), t
 
 
@@ -173,8 +176,12 @@ def test_without_withholding_its_std_covers_the_kick():
 
 def test_without_the_term_the_prediction_claims_millimetres():
     # the trap is real: the filter before the term (no jump rate) publishes the prediction
-    # 0.4 m off with a std of millimetres, and max_std_m lets it through
-    track, err, t = _unseen_kick(0.0, withhold=True)
+    # 0.4 m off with a std of millimetres, and max_std_m lets it through (session 47's hold of
+    # a rejected detection's point off)
+    track, err, t = _unseen_kick(0.0, withhold=True, holds=False)
     row = int(np.flatnonzero(track.time_ns == t)[0])
     assert track.quality["rejected"][row] == 1.0
     assert err[row] > 0.3 and err[row] > 20 * track.quality["std_m"][row]
+    # either defence alone: held, no other camera's detection releases it (the end)
+    track, err, t = _unseen_kick(0.0, withhold=True)
+    assert t not in track.time_ns and track.dropped["held"] >= 1

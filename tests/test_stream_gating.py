@@ -144,7 +144,9 @@ def test_push_frame_equals_push_of_the_frames_columns(method, candidates):
     for lens in (False, True) if method == "typeA" else (False,):
         rig, det = dirty(method, False, lens=lens)
         batch = fuse(det, rig, method, replace(options, gating=candidates))
-        assert len(batch) >= 20
+        # (the filter ungated: 18 points since session 47's holds withdraw the predictions
+        # of its rejected detections that the next camera rejects too)
+        assert len(batch) >= 15
         for form in ("push", "push_frame"):
             fuser = StreamFuser(rig, method, options, candidates=candidates)
             streamed = Track.concat([*push_frames(fuser, det, form, best=not candidates),

@@ -115,7 +115,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "them")
     parser.add_argument("--filter-hold", choices=("on", "off"), default="on",
                         help="filter: on: a point whose detection surprised the filter (NIS "
-                             "above 2) waits for another camera's next detection and is left "
+                             "above 2), follows a missed slot, starts a track or was "
+                             "rejected waits for another camera's next detection and is left "
                              "out (held) when that detection places a jump before it, is "
                              "rejected, or the track is lost first (or the session ends); "
                              "off: every point at its detection, as `pslog live` emits them "

@@ -175,8 +175,10 @@ class FusionOptions:
     filter_hold_nis : float or None, filter: its hold for the next camera
         (:attr:`pslog.fusion.filter.FilterOptions.hold_nis`, batch and stream alike: a
         stream emits a held point when the detection that decides it arrives, one stagger
-        later); default :data:`FILTER_HOLD_NIS` (session 30); None: no hold, a point at its
-        own detection (``pslog live`` turns it off)
+        later; with it, a start's point, a point after a missed slot and a rejected
+        detection's are held too, session 47: ``hold_start``, ``hold_gap``,
+        ``hold_rejected``); default :data:`FILTER_HOLD_NIS` (session 30); None: no hold, a
+        point at its own detection (``pslog live`` turns it off)
     clock_covariance : :class:`pslog.timing.ClockCovariance` or None, the covariance of the
         rig's clock estimates (``pslog sync``'s, read from a synced session by
         :func:`for_session`): every point's covariance gains its consider covariance, the

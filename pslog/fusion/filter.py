@@ -85,8 +85,9 @@ equations, exactly as implemented, are in ``docs/methods.md`` (section ``filter`
   accepted updates, one at least from another camera, confirm it (one camera's pixel does
   not fix the new velocity along its rays); ``uncertain``, ``std_m`` above ``max_std_m``;
   ``held`` (the batch and :class:`FilterStream`, ``hold_nis``): a point held for the next
-  detection of another camera — a plain update's of NIS above ``hold_nis``, and a start's
-  (``hold_start``: its window's fit can absorb one wrong detection) — withdrawn when that
+  detection of another camera — a plain update's of NIS above ``hold_nis`` or after a
+  missed slot (``hold_gap``), a start's (``hold_start``: its window's fit can absorb one
+  wrong detection) and a rejected detection's (``hold_rejected``) — withdrawn when that
   detection is rejected or made a jump placed before it, or the track is lost first.
 
 Causality: the point of a detection uses only the detections up to it in (time, camera)
@@ -379,6 +380,18 @@ class FilterOptions:
         were rejected). The next camera's detection is the first test the window did not
         make. Default True; False: a start's point leaves at its detection (before session
         47)
+    hold_gap : float or None, with the hold a plain update's point whose gap (``gap_s``,
+        since the previous accepted detection) exceeds this many staggers of the rig (``1 /
+        Σ fps``) is held too, whatever its NIS (session 47): a slot missed before it (a
+        detection missed or rejected, or a camera going on alone) leaves a longer span in
+        which a kick along the camera's ray passes its gate unseen (its probability ``λ_j T``
+        and the displacement it hides both grow with the span ``T``), and the next camera's
+        detection tells. Default 1.5 (any value in (1, 2) gives the same on a rig of evenly
+        staggered cameras: a missed slot); None: by NIS alone (before session 47)
+    hold_rejected : bool, with the hold a rejected detection's point (the prediction) is held
+        too, and withdrawn when the next camera's detection is rejected or made a jump
+        anywhere since the latest accepted detection before it (its instant is unknown
+        against the rejected detection's; session 47). Default True
     jump_rate_per_s : float, expected rate ``λ_j`` of velocity jumps (kicks, bounces), 1/s:
         a point's reported covariance adds the variance ``λ_j T σ_j² T² / 3`` along its
         camera's ray of a jump no other camera has seen in the time ``T`` since another
@@ -454,6 +467,8 @@ class FilterOptions:
     hold_nis: float | None = FILTER_HOLD_NIS
     hold_jump_p: float | None = 0.05
     hold_start: bool = True
+    hold_gap: float | None = 1.5
+    hold_rejected: bool = True
 
     def __post_init__(self) -> None:
         from dataclasses import fields
@@ -646,7 +661,10 @@ _OQDEAD, _OQGMAX = _OHOLDP + 1, _OHOLDP + 2
 #: 1: a third jump found before the first is confirmed restarts the track from its window
 #: (session 36, ``chained_jump_restart``)
 _OCHAIN = _OHOLDP + 3
-_OSIZE = _OHOLDP + 4
+#: the hold's further points (session 47): a plain update's whose gap exceeds this (seconds:
+#: ``hold_gap`` staggers; inf: none), and a rejected detection's (1: held)
+_OHOLDGAP, _OHOLDREJ = _OHOLDP + 4, _OHOLDP + 5
+_OSIZE = _OHOLDP + 6
 #: the held points at most at once (a camera alone past them: the later ones output)
 _HOLD_MAX = 8
 #: ``N`` (int64 options): max gap, window span, init_window, init_detections, max_rejects,
@@ -2370,11 +2388,26 @@ def _held(S, I, O, out, cam, pr, pc, pb, pn, index):
 
 @kernel
 def _to_hold(O, out, pn):
-    """Whether the output point ``out`` waits for the next camera (``hold_nis``): a plain
-    update's (no jump, not rejected, no start) whose NIS exceeds ``O[_OHOLD]``, while fewer
-    than ``_HOLD_MAX`` points are held (``pn``)."""
-    return (out[11] > O[_OHOLD] and out[13] == 0.0 and out[14] == 0.0 and out[15] == 0.0
-            and pn < _HOLD_MAX)
+    """Whether the output point ``out`` waits for the next camera (``hold_nis``), while
+    fewer than ``_HOLD_MAX`` points are held (``pn``): a plain update's (no jump, not
+    rejected, no start) whose NIS exceeds ``O[_OHOLD]`` or whose gap exceeds
+    ``O[_OHOLDGAP]`` (``hold_gap``), and a rejected detection's (the prediction;
+    ``hold_rejected``). (A start's is held in Python: ``hold_start``.)"""
+    if out[13] != 0.0 or out[15] != 0.0 or pn >= _HOLD_MAX or O[_OHOLD] == math.inf:
+        return False
+    if out[14] != 0.0:
+        return O[_OHOLDREJ] != 0.0
+    return out[11] > O[_OHOLD] or out[12] > O[_OHOLDGAP]
+
+
+@kernel(inline=True)
+def _held_count(out):
+    """A held point's first count of its camera's accepted detections since it (``pb``,
+    :func:`_held`): 0, or -1 for a rejected detection's (the prediction), which is not in
+    the jump's buffer: a jump the next camera's detection places anywhere after the
+    latest accepted detection before it (``lag >= 0``: every lag's probability) may lie
+    before the held instant, and withdraws it."""
+    return -1 if out[14] == 1.0 else 0
 
 
 @kernel
@@ -2417,7 +2450,7 @@ def _run(S, I, cams, O, N, times, cameras, uv, start, rows, index, n_out, pr, pc
             rows[n_out] = out
             index[n_out] = i
             if _to_hold(O, out, pn):
-                pr[pn], pc[pn], pb[pn] = n_out, cam, 0
+                pr[pn], pc[pn], pb[pn] = n_out, cam, _held_count(out)
                 pn += 1
             n_out += 1
         elif status != _NONE:  # (a fit: pn is 0, every held point withdrawn above)
@@ -2459,7 +2492,7 @@ def _step_held(S, I, cams, O, N, t, cam, u, v, out, P, R, T):
         rows[k] = out
         time[k], camera[k], index[k] = t, cam, k
         if _to_hold(O, out, pn):
-            pr[pn], pc[pn], pb[pn] = k, cam, 0
+            pr[pn], pc[pn], pb[pn] = k, cam, _held_count(out)
             pn += 1
         k += 1
     first = k
@@ -2887,6 +2920,9 @@ class BallFilter:
         O[_OHOLDP] = 2.0 if options.hold_jump_p is None else options.hold_jump_p
         O[_OQDEAD] = options.accel_adapt_threshold
         O[_OCHAIN] = float(options.chained_jump_restart)
+        O[_OHOLDGAP] = (math.inf if options.hold_gap is None
+                        else options.hold_gap / sum(float(c.fps) for c in rig.cameras))
+        O[_OHOLDREJ] = float(options.hold_rejected)
         O[_OQGMAX] = (options.accel_adapt_threshold
                       + (math.log(self._q_max / self._q_min) / options.accel_adapt_rate
                          if options.accel_adapt_rate > 0.0 else 0.0))
