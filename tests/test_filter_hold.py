@@ -8,9 +8,11 @@ before it (the jump's lag reaches back to it) or that may be (since session 31, 
 hypotheses reaching back to it carry a posterior probability of at least ``hold_jump_p``:
 tests/test_filter_hold_jump.py), was rejected, or the track was lost first (or none came);
 else output. Since session 47 a start's point (``init``) is held so too
-(``hold_start``). Checked against the rule written out in Python over every point
-of the same detections streamed (``withhold=False``, each jump's lag read), and on a flight
-kicked along a camera's ray, whose first point after the kick is 8.6 cm off.
+(``hold_start``), withdrawn by a jump whose lag reaches back to it (the jump search reaches no
+further back than a start: the session-47 review). Checked against the rule written out in
+Python over every point of the same detections streamed (``withhold=False``, each jump's lag
+read), and on a flight kicked along a camera's ray, whose first point after the kick is 8.6 cm
+off.
 """
 
 from __future__ import annotations
@@ -52,7 +54,10 @@ def _withdrawn_by_rule(obs, rig, options, theta):
         # (a start's point, its NIS NaN, is held too: hold_start, session 47)
         if not shown or jump or rej or not (nis > theta or (init and options.hold_start)):
             continue
-        verdict, between = True, 0  # withdrawn unless another camera's point releases it
+        # withdrawn unless another camera's point releases it; a start's count begins one
+        # lower (FM._START_PB): a jump reaching back to its detection withdraws it (the jump
+        # search reaches no further back than a start)
+        verdict, between = True, (FM._START_PB if init else 0)
         for _t2, c2, _, jump2, rej2, init2, (lag2, w2), _ in rows[i + 1:]:
             if init2:
                 break
