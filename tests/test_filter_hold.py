@@ -9,10 +9,12 @@ hypotheses reaching back to it carry a posterior probability of at least ``hold_
 tests/test_filter_hold_jump.py), was rejected, or the track was lost first (or none came);
 else output. Since session 47 a start's point (``init``: ``hold_start``), a plain update's
 after a gap of more than 1.5 staggers (``hold_gap``) and a rejected detection's (the
-prediction: ``hold_rejected``; withdrawn by any jump since the accepted detection before it)
-are held too. Checked against the rule written out in Python over every point
-of the same detections streamed (``withhold=False``, each jump's lag read), and on a flight
-kicked along a camera's ray, whose first point after the kick is 8.6 cm off.
+prediction: ``hold_rejected``) are held too; a start's and a rejected detection's are
+withdrawn by a jump whose lag reaches back to them (the jump search reaches no further back
+than a start: the session-47 review; a rejected detection is not among the lags: any jump
+since the accepted detection before it). Checked against the rule written out in Python over
+every point of the same detections streamed (``withhold=False``, each jump's lag read), and on
+a flight kicked along a camera's ray, whose first point after the kick is 8.6 cm off.
 """
 
 from __future__ import annotations
@@ -66,9 +68,11 @@ def _withdrawn_by_rule(obs, rig, options, theta):
             held = nis > theta or gap > gap_max
         if not held:
             continue
-        # withdrawn unless another camera's point releases it; a rejected detection is not
-        # among the jump's lags: any jump since the accepted detection before it withdraws it
-        verdict, between = True, -1 if rej else 0
+        # withdrawn unless another camera's point releases it; a start's and a rejected
+        # detection's count begins one lower (FM._START_PB, -1: a jump reaching back to a
+        # start withdraws it, the jump search reaching no further back; a rejected detection
+        # is not among the jump's lags: any jump since the accepted detection before it)
+        verdict, between = True, (FM._START_PB if init or rej else 0)
         for _t2, c2, _, _, jump2, rej2, init2, (lag2, w2), _ in rows[i + 1:]:
             if init2:
                 break

@@ -87,3 +87,63 @@ def test_no_hold_leaves_a_start_at_its_detection():
                     doubt=doubt)
     np.testing.assert_array_equal(a.position_world, b.position_world)
     assert "held" not in a.dropped
+
+
+def _jump_after_start_session():
+    """``paper2`` with a static object in ``cam2``'s view, 20 % spurious blobs, 10 % misses
+    (seed 85343, the session-47 review's randomized check): (detections, truth, rig)."""
+    from _rally import rally
+
+    from pslog.simulation import true_rig
+
+    seed = 85343
+    rig = apply_timing(builtin_rig("paper2"), "typeA")
+    options = SimulationOptions(noise_px=0.5, seed=seed, miss_rate=0.1, spurious_rate=0.2,
+                                distractors=((rig.names[1], DISTRACTOR),))
+    motion = rally(3.0, seed=seed, speed=4.0 + seed % 3, kick_every_s=0.6)[0]
+    detections, truth, _ = simulate_labelled(rig, motion, 3.0, options)
+    return detections, truth, true_rig(rig, options)
+
+
+def test_a_start_the_next_camera_needs_a_jump_for_is_withdrawn():
+    """The jump search reaches no further back than a start (a start resets its history), so
+    no jump is ever placed before a start's detection: a start is withdrawn by a jump whose
+    lag reaches back to its detection (``_START_PB``). Here the first start (0.133 s, 118 mm
+    off, ``std_m`` 22 mm) is followed by ``cam2``'s detection, explained only by a jump (NIS
+    14.8 after it): released, before, as a plain point's hold releases one after a jump
+    placed after it; withdrawn now."""
+    from test_stream_gating import assert_same_track, push_frames
+
+    from pslog.fusion import fuse
+    from pslog.fusion.stream import StreamFuser
+    from pslog.records import Track
+
+    detections, truth, rig = _jump_after_start_session()
+    gated = gate_for(detections, rig, "filter", FusionOptions())
+    obs, doubt = gated.observations, gated.doubt_px2
+    # the case is live: every point shown, the start and the next camera's jump
+    shown = fuse_filter(obs, rig, options=FilterOptions(hold_nis=None, withhold=False),
+                        doubt=doubt)
+    err = errors_m(shown, truth)
+    far = np.flatnonzero((shown.quality["init"] == 1) & (err > 0.05))
+    assert len(far) == 1 and err[far[0]] > 0.1
+    start = int(far[0])
+    assert abs(shown.time_ns[start] / 1e9 - 0.1333) < 1e-3
+    assert shown.camera[start + 1] != shown.camera[start]
+    assert shown.quality["jump"][start + 1] == 1
+    # the start's hold withdraws it, that point alone
+    held = fuse_filter(obs, rig, doubt=doubt)
+    assert np.nanmax(errors_m(held, truth)) < 0.05
+    free = fuse_filter(obs, rig, options=FilterOptions(hold_start=False), doubt=doubt)
+    assert len(held) == len(free) - 1
+    assert held.dropped["held"] == free.dropped.get("held", 0) + 1
+    keep = free.time_ns != shown.time_ns[start]
+    np.testing.assert_array_equal(held.position_world, free.position_world[keep])
+    # the stream withdraws it alike
+    batch = fuse(detections, rig, "filter", FusionOptions())
+    assert_same_track(batch, held)
+    fuser = StreamFuser(rig, "filter", FusionOptions(), candidates=True)
+    assert_same_track(Track.concat([*push_frames(fuser, detections), fuser.flush()]), batch)
+    fuser = StreamFuser(rig, "filter", FusionOptions(), candidates=True)
+    assert_same_track(Track.concat([*push_frames(fuser, detections, "push_frame"),
+                                    fuser.flush()]), batch)

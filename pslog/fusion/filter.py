@@ -88,7 +88,9 @@ equations, exactly as implemented, are in ``docs/methods.md`` (section ``filter`
   detection of another camera — a plain update's of NIS above ``hold_nis`` or after a
   missed slot (``hold_gap``), a start's (``hold_start``: its window's fit can absorb one
   wrong detection) and a rejected detection's (``hold_rejected``) — withdrawn when that
-  detection is rejected or made a jump placed before it, or the track is lost first.
+  detection is rejected or made a jump placed before it (a start's and a rejected one's:
+  anywhere the jump search reaches back to, since the accepted detection before it), or the
+  track is lost first.
 
 Causality: the point of a detection uses only the detections up to it in (time, camera)
 order; batch (:func:`fuse_filter`) and streaming run the same per-detection code, so the
@@ -371,7 +373,9 @@ class FilterOptions:
     hold_start : bool, with the hold (``hold_nis`` not None, ``withhold``) a start's point
         (``init`` 1) is held as a point of large NIS is: it waits for the next detection
         of another camera and is withdrawn (``held``) when that detection is rejected, made
-        a jump placed before it, or the track was lost first (session 47). A start's window
+        a jump reaching back to the start's detection (the jump search reaches no further
+        back than a start: a jump there is the fitted path missing the next camera; the
+        session-47 review), or the track was lost first (session 47). A start's window
         fit has ``2n - 6`` degrees of freedom (2 for the 4 detections of a first start) and
         can bend to absorb one wrong detection within the gate (``paper3`` in
         ``bench_dirty.py --more --first-seed 83100 --misses 0.1``, rally-83107: a static
@@ -667,6 +671,11 @@ _OHOLDGAP, _OHOLDREJ = _OHOLDP + 4, _OHOLDP + 5
 _OSIZE = _OHOLDP + 6
 #: the held points at most at once (a camera alone past them: the later ones output)
 _HOLD_MAX = 8
+#: a held start's ``pb`` (:func:`_held`): one below a plain point's 0, so that a jump whose
+#: lag reaches back to the start's detection withdraws it (the jump search reaches no
+#: further back than a start, whose history it resets: with 0 no jump could, and a start
+#: the next camera's detection disagrees with by a jump left; review of session 47)
+_START_PB = -1
 #: ``N`` (int64 options): max gap, window span, init_window, init_detections, max_rejects,
 #: window capacity
 _NMAXGAP, _NSPAN, _NINITWIN, _NINITDET, _NMAXREJ, _NWCAP = range(6)
@@ -2365,7 +2374,10 @@ def _held(S, I, O, out, cam, pr, pc, pb, pn, index):
     winner's lag reaches back to it; every jump when the lag is not kept), or a jump whose
     hypotheses placing it before the held detection carry a posterior probability of at
     least ``O[_OHOLDP]`` (``hold_jump_p``, session 31: the held camera's pixel does not see
-    a kick along its ray, so the winner's lag may be the wrong one), or was rejected.
+    a kick along its ray, so the winner's lag may be the wrong one), or was rejected. A held
+    start's and a held rejected detection's ``pb`` begins at ``_START_PB`` (-1): a jump
+    reaching back to the start's detection, or anywhere since the accepted detection
+    before the rejected one, withdraws it.
     Returns the number still held (compacted in place)."""
     jump, rejected = out[13] == 1.0, out[14] == 1.0
     lag = I[_IJLAG] if O[_OINSTANT] != 0.0 else _JBUF
@@ -2403,11 +2415,11 @@ def _to_hold(O, out, pn):
 @kernel(inline=True)
 def _held_count(out):
     """A held point's first count of its camera's accepted detections since it (``pb``,
-    :func:`_held`): 0, or -1 for a rejected detection's (the prediction), which is not in
-    the jump's buffer: a jump the next camera's detection places anywhere after the
-    latest accepted detection before it (``lag >= 0``: every lag's probability) may lie
-    before the held instant, and withdraws it."""
-    return -1 if out[14] == 1.0 else 0
+    :func:`_held`): 0, or ``_START_PB`` (-1) for a rejected detection's (the prediction), which
+    is not in the jump's buffer: a jump the next camera's detection places anywhere after
+    the latest accepted detection before it (``lag >= 0``: every lag's probability) may lie
+    before the held instant, and withdraws it (as a held start's, set in Python)."""
+    return _START_PB if out[14] == 1.0 else 0
 
 
 @kernel
@@ -3863,7 +3875,7 @@ class FilterStream:
         index = np.concatenate([hold.index[:k], np.arange(k, k + point, dtype=np.int64)])
         if point and flt._holds_start(out, hold.n):  # (row k: behind those waiting)
             n = hold.n
-            hold.pr[n], hold.pc[n], hold.pb[n] = k, camera, 0
+            hold.pr[n], hold.pc[n], hold.pb[n] = k, camera, _START_PB
             hold.n = n + 1
         return _rows_track(*hold.settle(rows, time, cams, index, final=False),
                            _withheld_since(flt, dropped))
@@ -4065,7 +4077,7 @@ def _track(flt: BallFilter, time_ns, camera, uv, doubt: np.ndarray | None = None
         if flt._fitted(status, rows[n_out]):  # the rare path: a window fit
             index[n_out] = i
             if flt._holds_start(rows[n_out], pn):  # (pn 0: the fit withdrew the held ones)
-                hold.pr[pn], hold.pc[pn], hold.pb[pn] = n_out, cameras[i], 0
+                hold.pr[pn], hold.pc[pn], hold.pb[pn] = n_out, cameras[i], _START_PB
                 pn += 1
             n_out += 1
         i += 1
