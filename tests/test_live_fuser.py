@@ -34,6 +34,10 @@ from pslog.simulation import SimulationOptions, true_rig
 from pslog.timing import camera_parameters, true_times_ns
 from tests._live import EPOCH, datagrams, frames, rally_session, subset
 
+#: what `pslog live` fuses as: the filter's points at their detection (no hold for the next
+#: camera: `pslog fuse --filter-hold off`)
+LIVE = FusionOptions(filter_hold_nis=None)
+
 
 class Clock:
     """A wall clock the test sets (t_emit and the predictions become exact)."""
@@ -182,7 +186,7 @@ def test_bad_datagrams_are_counted_and_change_nothing(session):
     assert c["fused"] == kept.sum() and c["received"] == len(data)
     # no frame was lost on the way: the out-of-order frame 40 came (its gap is not counted)
     assert c["lost"] == 0
-    _assert_same(points, fuse(subset(det, kept), rig, "filter"))
+    _assert_same(points, fuse(subset(det, kept), rig, "filter", LIVE))
     # what was dropped is kept, with its reason, for a recorder
     reasons = sorted(r for _, r in fuser.dropped)
     assert reasons.count("duplicate") == expect["duplicate"]
@@ -233,7 +237,7 @@ def test_silent_camera_and_its_return(session):
     after = [p for p in points if p.t_capture_ns - EPOCH > 1.0 * NS]
     assert "cam2" in {p.camera for p in after}
     assert not {c.name: c for c in fuser.cameras()}["cam2"].silent
-    _assert_same(points, fuse(subset(det, ~gap), rig, "filter"))
+    _assert_same(points, fuse(subset(det, ~gap), rig, "filter", LIVE))
     # the frames it never sent show as a gap in its sequence
     assert fuser.counters()["lost"] == gap.sum()
 
@@ -875,7 +879,7 @@ def test_frames_without_candidates_never_hold_the_order(session):
     points = _run(fuser, [encode_detections(clean[i]) for i in order])
     c = fuser.counters()
     assert c["reordered"] == c["late"] == 0 and c["fused"] == len(clean)
-    _assert_same(points, fuse(det, rig, "filter"))
+    _assert_same(points, fuse(det, rig, "filter", LIVE))
 
 
 def _overtaken(clean):
@@ -910,7 +914,7 @@ def test_hold_fuses_frames_that_overtook_one_another(session):
     points = _run(held, data, arrival)
     c = held.counters()
     assert c["reordered"] == c["late"] == 0 and c["fused"] == len(clean)
-    _assert_same(points, fuse(det, rig, "filter"))
+    _assert_same(points, fuse(det, rig, "filter", LIVE))
 
 
 def test_hold_does_not_wait_for_a_silent_camera(session):
