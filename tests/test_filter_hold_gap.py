@@ -63,35 +63,36 @@ def _only_withdrawn(held, free, t_s: float):
     assert not np.any(np.abs(held.time_ns / 1e9 - t_s) < 1e-4)
 
 
-def test_the_first_point_after_a_kick_past_a_missed_slot_is_withdrawn():
-    gated, truth, rig = _session("lab4", 83101, 0.1, "lab4-2", ("lab4-3", 2.1, 0.5))
+def _withdrawn(session: tuple, off: dict, t_s: float, n_min: int, err_min: float):
+    """``session``'s filter (the defaults) has no point beyond 5 cm; with the hold ``off``
+    (FilterOptions fields) it has one, at ``t_s``, more than ``err_min`` m off, which the
+    defaults alone withdraw. Returns that point's quality (name -> value) and the rig."""
+    gated, truth, rig = _session(*session)
     obs, doubt = gated.observations, gated.doubt_px2
     held = fuse_filter(obs, rig, doubt=doubt)
-    assert len(held) > 400 and _far(held, truth) == []
-    # the case is live: held by its NIS alone (before session 47), it is output
-    free = fuse_filter(obs, rig, options=FilterOptions(hold_gap=None), doubt=doubt)
+    assert len(held) > n_min and _far(held, truth) == []
+    # the case is live: without the hold the point is output
+    free = fuse_filter(obs, rig, options=FilterOptions(**off), doubt=doubt)
     far = _far(free, truth)
-    assert len(far) == 1 and far[0][0] == 2.0417 and far[0][1] > 0.1
-    i = int(np.flatnonzero(np.abs(free.time_ns / 1e9 - 2.0417) < 1e-4)[0])
-    q = free.quality
-    assert q["jump"][i] == 0 and q["rejected"][i] == 0 and q["nis"][i] < 2.0
+    assert len(far) == 1 and far[0][0] == t_s and far[0][1] > err_min
+    _only_withdrawn(held, free, t_s)
+    i = int(np.flatnonzero(np.abs(free.time_ns / 1e9 - t_s) < 1e-4)[0])
+    return {name: col[i] for name, col in free.quality.items()}, rig
+
+
+def test_the_first_point_after_a_kick_past_a_missed_slot_is_withdrawn():
+    # held by its NIS alone (before session 47), it is output
+    q, rig = _withdrawn(("lab4", 83101, 0.1, "lab4-2", ("lab4-3", 2.1, 0.5)),
+                        {"hold_gap": None}, 2.0417, 400, 0.1)
+    assert q["jump"] == 0 and q["rejected"] == 0 and q["nis"] < 2.0
     stagger = 1.0 / sum(c.fps for c in rig.cameras)
-    assert q["gap_s"][i] > 1.5 * stagger
-    _only_withdrawn(held, free, 2.0417)
+    assert q["gap_s"] > 1.5 * stagger
 
 
 def test_a_rejected_detections_prediction_past_a_kick_is_withdrawn():
-    gated, truth, rig = _session("paper3", 84707, 0.2, "cam3", ("cam2", 2.7, 0.5))
-    obs, doubt = gated.observations, gated.doubt_px2
-    held = fuse_filter(obs, rig, doubt=doubt)
-    assert len(held) > 300 and _far(held, truth) == []
-    free = fuse_filter(obs, rig, options=FilterOptions(hold_rejected=False), doubt=doubt)
-    far = _far(free, truth)
-    assert len(far) == 1 and far[0][0] == 3.1556 and far[0][1] > 0.15
-    i = int(np.flatnonzero(np.abs(free.time_ns / 1e9 - 3.1556) < 1e-4)[0])
-    assert free.quality["rejected"][i] == 1
-    _only_withdrawn(held, free, 3.1556)
-
+    q, _ = _withdrawn(("paper3", 84707, 0.2, "cam3", ("cam2", 2.7, 0.5)),
+                      {"hold_rejected": False}, 3.1556, 300, 0.15)
+    assert q["rejected"] == 1
 
 
 def test_most_rejected_detections_points_stay():
