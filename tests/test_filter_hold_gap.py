@@ -25,6 +25,7 @@ from _rigs import ring_rig
 from test_filter_jump_instant import kicked
 
 from pslog import SimulationOptions, apply_timing, builtin_rig
+from pslog.errors import FusionError
 from pslog.evaluation import errors_m
 from pslog.fusion import FusionOptions
 from pslog.fusion.filter import BallFilter, FilterOptions, FilterStream, fuse_filter, regular_gap_s
@@ -182,3 +183,12 @@ def test_a_gap_holds_only_after_a_missed_slot(make):
             break
     kept = obs.select(obs.time_ns != instants[k])
     assert point in _late(rig, kept, 1.5) - _late(rig, kept, None)
+
+
+@pytest.mark.parametrize("value", [-1.0, float("nan"), float("inf"), True, "1.5"])
+def test_a_wrong_hold_gap_is_refused(value):
+    # (a NaN silently held nothing; a string failed with a TypeError in BallFilter)
+    with pytest.raises(FusionError, match="filter hold_gap must be None"):
+        FilterOptions(hold_gap=value)
+    FilterOptions(hold_gap=0)
+    FilterOptions(hold_gap=None)

@@ -545,6 +545,11 @@ class FilterOptions:
                 math.isfinite(self.hold_nis) and self.hold_nis >= 0)):
             raise FusionError(f"filter hold_nis must be finite and >= 0, got "
                               f"{self.hold_nis!r}")
+        if self.hold_gap is not None and (isinstance(self.hold_gap, bool) or not (
+                isinstance(self.hold_gap, (int, float)) and 0 <= self.hold_gap < math.inf)):
+            # (a NaN held nothing, a string failed in BallFilter with a TypeError)
+            raise FusionError(f"filter hold_gap must be None (by NIS alone) or finite and >= 0 "
+                              f"regular gaps, got {self.hold_gap!r}")
         if self.hold_jump_p is not None and (isinstance(self.hold_jump_p, bool) or not (
                 isinstance(self.hold_jump_p, (int, float)) and 0 <= self.hold_jump_p <= 1)):
             raise FusionError(f"filter hold_jump_p must be None (the winner's lag alone) or a "
