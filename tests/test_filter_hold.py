@@ -52,10 +52,11 @@ def _withdrawn_by_rule(obs, rig, options, theta):
         w = flt._S[FM._SJLW:FM._SJLW + FM._HISTORY].copy()
         rows.append((t, c, q[6], q[7], q[8], q[9], q[10], (lag, w), shown is not None))
     p_min = 2.0 if options.hold_jump_p is None else options.hold_jump_p
-    # (session 47) a plain point after a gap of more than hold_gap staggers, a start's and a
+    # (session 47) a plain point after a gap of more than hold_gap regular gaps of the rig (its
+    # longest between consecutive frame instants: 1 / Σ fps here), a start's and a
     # rejected detection's are held too
     gap_max = (math.inf if options.hold_gap is None
-               else options.hold_gap / sum(c.fps for c in rig.cameras))
+               else options.hold_gap * FM.regular_gap_s(rig))
     gone = set()
     for i, (t, c, nis, gap, jump, rej, init, _, shown) in enumerate(rows):
         if not shown or jump:

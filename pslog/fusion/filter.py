@@ -385,13 +385,18 @@ class FilterOptions:
         make. Default True; False: a start's point leaves at its detection (before session
         47)
     hold_gap : float or None, with the hold a plain update's point whose gap (``gap_s``,
-        since the previous accepted detection) exceeds this many staggers of the rig (``1 /
-        Σ fps``) is held too, whatever its NIS (session 47): a slot missed before it (a
+        since the previous accepted detection) exceeds this many of the rig's regular gaps
+        (:func:`regular_gap_s`: the longest time between consecutive frame instants of its
+        cameras, ``1 / Σ fps`` on evenly staggered cameras of one rate, ``1 / fps`` on
+        synchronised ones; session 47's review: ``1 / Σ fps`` held a third of the points of
+        ``sync`` and ``typeB`` rigs, no slot missed) is held too, whatever its NIS (session
+        47): a slot missed before it (a
         detection missed or rejected, or a camera going on alone) leaves a longer span in
         which a kick along the camera's ray passes its gate unseen (its probability ``λ_j T``
         and the displacement it hides both grow with the span ``T``), and the next camera's
-        detection tells. Default 1.5 (any value in (1, 2) gives the same on a rig of evenly
-        staggered cameras: a missed slot); None: by NIS alone (before session 47)
+        detection tells. Default 1.5 (above 1, a gap beyond it has a frame instant inside: a
+        missed slot; any value in (1, 2) gives the same on evenly staggered cameras of one
+        rate); None: by NIS alone (before session 47)
     hold_rejected : bool, with the hold a rejected detection's point (the prediction) is held
         too, and withdrawn when the next camera's detection is rejected or made a jump
         anywhere since the latest accepted detection before it (its instant is unknown
@@ -540,6 +545,11 @@ class FilterOptions:
                 math.isfinite(self.hold_nis) and self.hold_nis >= 0)):
             raise FusionError(f"filter hold_nis must be finite and >= 0, got "
                               f"{self.hold_nis!r}")
+        if self.hold_gap is not None and (isinstance(self.hold_gap, bool) or not (
+                isinstance(self.hold_gap, (int, float)) and 0 <= self.hold_gap < math.inf)):
+            # (a NaN held nothing, a string failed in BallFilter with a TypeError)
+            raise FusionError(f"filter hold_gap must be None (by NIS alone) or finite and >= 0 "
+                              f"regular gaps, got {self.hold_gap!r}")
         if self.hold_jump_p is not None and (isinstance(self.hold_jump_p, bool) or not (
                 isinstance(self.hold_jump_p, (int, float)) and 0 <= self.hold_jump_p <= 1)):
             raise FusionError(f"filter hold_jump_p must be None (the winner's lag alone) or a "
@@ -666,7 +676,8 @@ _OQDEAD, _OQGMAX = _OHOLDP + 1, _OHOLDP + 2
 #: (session 36, ``chained_jump_restart``)
 _OCHAIN = _OHOLDP + 3
 #: the hold's further points (session 47): a plain update's whose gap exceeds this (seconds:
-#: ``hold_gap`` staggers; inf: none), and a rejected detection's (1: held)
+#: ``hold_gap`` regular gaps, :func:`regular_gap_s`; inf: none), and a rejected detection's (1:
+#: held)
 _OHOLDGAP, _OHOLDREJ = _OHOLDP + 4, _OHOLDP + 5
 _OSIZE = _OHOLDP + 6
 #: the held points at most at once (a camera alone past them: the later ones output)
@@ -2819,6 +2830,30 @@ def _state_vector(index: int, size: int, doc: str) -> property:
     return property(get, set_, doc=doc)
 
 
+def regular_gap_s(rig: Rig) -> float:
+    """The rig's regular gap, seconds: the longest time between consecutive frame instants
+    of its cameras (their nominal shutter times ``offset + k / fps``, as
+    :func:`~pslog.simulation.shutter_times`; a rolling shutter's readout left out), the
+    time a detection follows the one before it when no slot was missed: ``1 / Σ fps`` on
+    evenly staggered cameras of one rate (``typeA``), ``1 / fps`` on synchronised ones,
+    ``0.5 / fps`` on ``typeB``. Measured over a minute of instants: rates whose pattern
+    repeats within it exactly, others (close rates, 29.97 and 30 fps, beat: their instants
+    pass through one another) at the longest gap of that minute. ``hold_gap``'s unit."""
+    return _regular_gap_s(tuple((float(c.fps), float(c.offset)) for c in rig.cameras))
+
+
+@functools.lru_cache(maxsize=64)
+def _regular_gap_s(cameras: tuple[tuple[float, float], ...]) -> float:
+    """:func:`regular_gap_s` of the cameras' (fps, first instant) (hashable: cached)."""
+    span = 60.0
+    period = max(1.0 / fps for fps, _ in cameras)  # (every camera's instants begun by then)
+    instants = np.sort(np.concatenate([
+        (first % (1.0 / fps)) + np.arange(math.ceil((span + 2 * period) * fps) + 1) / fps
+        for fps, first in cameras]))
+    inside = instants[(instants >= period) & (instants <= span + period)]
+    return float(np.max(np.diff(inside)))
+
+
 class BallFilter:
     """The ``filter`` method's state, updated one detection at a time (the streaming form).
 
@@ -2933,7 +2968,7 @@ class BallFilter:
         O[_OQDEAD] = options.accel_adapt_threshold
         O[_OCHAIN] = float(options.chained_jump_restart)
         O[_OHOLDGAP] = (math.inf if options.hold_gap is None
-                        else options.hold_gap / sum(float(c.fps) for c in rig.cameras))
+                        else options.hold_gap * regular_gap_s(rig))
         O[_OHOLDREJ] = float(options.hold_rejected)
         O[_OQGMAX] = (options.accel_adapt_threshold
                       + (math.log(self._q_max / self._q_min) / options.accel_adapt_rate
