@@ -193,3 +193,19 @@ def test_a_wrong_hold_gap_is_refused(value):
         FilterOptions(hold_gap=value)
     FilterOptions(hold_gap=0)
     FilterOptions(hold_gap=None)
+
+
+def test_the_regular_gap_by_hand_and_on_the_rigs_bounds():
+    # evenly staggered (1 / Σ fps), synchronised (1 / fps), 30 + 60 fps 4 ms apart (the 60 fps
+    # camera's 16.7 ms, the 30 fps instants falling 4 ms into every other one), uneven offsets
+    # (two 0.1 fps cameras 3 s apart: 7 s); and the rig's bounds, 256 cameras at 1e6 fps, laid
+    # out over less than a minute (at most _GAP_INSTANTS instants): 1 / Σ fps still
+    from pslog.fusion.filter import _regular_gap_s
+
+    assert abs(_regular_gap_s(((30.0, 0.0), (30.0, 1 / 90), (30.0, 2 / 90))) - 1 / 90) < 1e-9
+    assert abs(_regular_gap_s(((30.0, 0.0), (30.0, 0.0))) - 1 / 30) < 1e-9
+    assert abs(_regular_gap_s(((30.0, 0.0), (60.0, 0.004))) - 1 / 60) < 1e-9
+    assert abs(_regular_gap_s(((0.1, 0.0), (0.1, 3.0))) - 7.0) < 1e-6
+    fast = tuple((1e6, k / 256e6) for k in range(256))
+    assert abs(_regular_gap_s(fast) - 1 / 256e6) < 1e-12
+    assert abs(_regular_gap_s(((0.1, 0.0), (1e6, 0.0))) - 1e-6) < 1e-12

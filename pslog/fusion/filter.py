@@ -2842,15 +2842,27 @@ def regular_gap_s(rig: Rig) -> float:
     return _regular_gap_s(tuple((float(c.fps), float(c.offset)) for c in rig.cameras))
 
 
+#: most frame instants :func:`regular_gap_s` lays out, all cameras together (a rig of fast
+#: cameras is measured over less than a minute: 256 cameras at 1e6 fps, the rig's bounds,
+#: would be 1.5e10 instants)
+_GAP_INSTANTS = 4_000_000
+
+
 @functools.lru_cache(maxsize=64)
 def _regular_gap_s(cameras: tuple[tuple[float, float], ...]) -> float:
-    """:func:`regular_gap_s` of the cameras' (fps, first instant) (hashable: cached)."""
+    """:func:`regular_gap_s` of the cameras' (fps, first instant) (hashable: cached): their
+    instants over a minute after the slowest camera's first period (every camera's begun by
+    then), each camera's at most ``_GAP_INSTANTS / len(cameras)`` of them, over the span all
+    of them cover."""
     span = 60.0
     period = max(1.0 / fps for fps, _ in cameras)  # (every camera's instants begun by then)
-    instants = np.sort(np.concatenate([
-        (first % (1.0 / fps)) + np.arange(math.ceil((span + 2 * period) * fps) + 1) / fps
-        for fps, first in cameras]))
-    inside = instants[(instants >= period) & (instants <= span + period)]
+    most = max(_GAP_INSTANTS // len(cameras), 16)
+    each = [(first % (1.0 / fps))
+            + np.arange(min(math.ceil((span + 2 * period) * fps) + 1, most)) / fps
+            for fps, first in cameras]
+    end = min(float(a[-1]) for a in each)
+    instants = np.sort(np.concatenate(each))
+    inside = instants[(instants >= (period if period < end else 0.0)) & (instants <= end)]
     return float(np.max(np.diff(inside)))
 
 
