@@ -182,6 +182,8 @@ def test_a_gap_holds_only_after_a_missed_slot(make):
         if (instants[k + 1] - instants[k - 1] > 1.5e9 * regular_gap_s(rig)
                 and nis.get(point, 9.0) < 1.0):
             break
+    else:
+        raise AssertionError("no frame instant to miss before a point of NIS < 1")
     kept = obs.select(obs.time_ns != instants[k])
     assert point in _late(rig, kept, 1.5) - _late(rig, kept, None)
 
