@@ -37,17 +37,19 @@ from pslog.timing import observations as corrected_observations
 DISTRACTOR = (1.0, 1.5, 0.2)  # bench_dirty's static object
 
 
-@functools.lru_cache(maxsize=2)
-def _session(rig_name: str, seed: int, misses: float, distractor: str, blackout: tuple):
-    """bench_dirty --more's session ``rally-<seed>`` on ``rig_name`` with its faults:
-    (the gate's choices for the filter, the truth, the rig)."""
+@functools.lru_cache(maxsize=4)
+def _session(rig_name: str, seed: int, misses: float, distractor: str, blackout: tuple,
+             faults: bool = True):
+    """bench_dirty --more's session ``rally-<seed>`` on ``rig_name`` with its faults (or, not
+    ``faults``, its clean session): (the gate's choices for the filter, the truth, the rig).
+    (Also tests/test_filter_start_hold.py's.)"""
     rig = (ring_rig(4, "lab4") if rig_name == "lab4"
            else apply_timing(builtin_rig(rig_name), "typeA"))
     motion, _ = dirty_rally(seed, 8.0)
+    extra = ({"spurious_rate": 0.05, "distractors": ((distractor, DISTRACTOR),),
+              "blackouts": (blackout,)} if faults else {})
     options = SimulationOptions(noise_px=0.3, seed=seed - 300, miss_rate=misses,
-                                drop_rate=misses / 2, spurious_rate=0.05,
-                                distractors=((distractor, DISTRACTOR),),
-                                blackouts=(blackout,))
+                                drop_rate=misses / 2, **extra)
     detections, truth, _ = simulate_labelled(rig, motion, 8.0, options)
     return gate_for(detections, rig, "filter", FusionOptions()), truth, rig
 

@@ -13,10 +13,9 @@ which rejects it: withdrawn (``held``).
 
 from __future__ import annotations
 
-import functools
-
 import numpy as np
-from _rally import dirty_rally
+from test_filter_hold_gap import DISTRACTOR
+from test_filter_hold_gap import _session as _held_out
 
 from pslog import SimulationOptions, apply_timing, builtin_rig
 from pslog.evaluation import errors_m
@@ -25,21 +24,11 @@ from pslog.fusion.filter import FilterOptions, fuse_filter
 from pslog.fusion.gating import gate_for
 from pslog.simulation import simulate_labelled
 
-DISTRACTOR = (1.0, 1.5, 0.2)  # bench_dirty's static object
 
-
-@functools.lru_cache(maxsize=2)
 def _session(faults: bool):
     """rally-83107 on paper3 as bench_dirty --more makes it (misses 0.1, its faults or none):
     (the gate's choices for the filter, the truth, the rig)."""
-    rig = apply_timing(builtin_rig("paper3"), "typeA")
-    motion, _ = dirty_rally(83107, 8.0)
-    extra = ({"spurious_rate": 0.05, "distractors": (("cam2", DISTRACTOR),),
-              "blackouts": (("cam2", 2.7, 0.5),)} if faults else {})
-    options = SimulationOptions(noise_px=0.3, seed=82807, miss_rate=0.1, drop_rate=0.05,
-                                **extra)
-    detections, truth, _ = simulate_labelled(rig, motion, 8.0, options)
-    return gate_for(detections, rig, "filter", FusionOptions()), truth, rig
+    return _held_out("paper3", 83107, 0.1, "cam2", ("cam2", 2.7, 0.5), faults)
 
 
 def test_a_start_on_a_static_object_kept_unjudged_is_withdrawn():
