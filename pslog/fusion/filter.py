@@ -2979,7 +2979,8 @@ class BallFilter:
         O[_OHOLDP] = 2.0 if options.hold_jump_p is None else options.hold_jump_p
         O[_OQDEAD] = options.accel_adapt_threshold
         O[_OCHAIN] = float(options.chained_jump_restart)
-        O[_OHOLDGAP] = (math.inf if options.hold_gap is None
+        # (the regular gap laid out only where something is held: pslog live holds nothing)
+        O[_OHOLDGAP] = (math.inf if options.hold_gap is None or O[_OHOLD] == math.inf
                         else options.hold_gap * regular_gap_s(rig))
         O[_OHOLDREJ] = float(options.hold_rejected)
         O[_OQGMAX] = (options.accel_adapt_threshold
