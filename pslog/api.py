@@ -36,6 +36,7 @@ if TYPE_CHECKING:  # the heavy modules load when first called, not at `import ps
     from .fusion.gating import Rejections
     from .log.reader import Session
     from .rig import Rig
+    from .timing import ShutterPhases
 
 __all__ = ["FuseResult", "SyncOutcome", "evaluate", "fuse", "read_session", "sync"]
 
@@ -220,7 +221,9 @@ class SyncOutcome:
 
     Attributes
     ----------
-    rig : the session's rig holding the estimated clocks (offset, drift, readout)
+    rig : the session's rig holding the estimated clocks (offset, drift, readout), and the
+        shutter offsets measured where ``phases`` (below) was written; what ``pslog sync``
+        writes into the copy
     result : :class:`pslog.estimation.sync.SyncResult` (per camera estimates with their
         standard deviations, RMS residual and pixel noise)
     detections : the detections the estimate used, on the session clock: the session's own,
@@ -240,6 +243,11 @@ class SyncOutcome:
     motion_period_s : the period (s) with which the ball's motion repeats in every camera's
         view (:func:`pslog.estimation.sync.motion_period`; a turntable), or None: offsets
         whole periods apart then fit alike, and ``notes`` says so
+    phases : :class:`pslog.timing.ShutterPhases`, each camera's shutter offset measured from
+        its frames' corrected times (None: ``phases="keep"``)
+    phases_written : whether ``rig`` holds them (``phases="measure"``, every camera's phase
+        steady and some camera's further than :data:`pslog.timing.PHASE_AGREE` of its
+        frame period from the session rig's ``offset``; ``notes`` says so)
     """
 
     rig: Rig
@@ -251,11 +259,14 @@ class SyncOutcome:
     prior: Rig | None = None
     prior_estimated: bool = False
     motion_period_s: float | None = None
+    phases: ShutterPhases | None = None
+    phases_written: bool = False
 
 
 def sync(session: Session | str | os.PathLike[str],
          estimate: str | Sequence[str] = "auto", *, search_s: float | None = None,
-         regularize: Literal["auto", "on", "off"] = "auto") -> SyncOutcome:
+         regularize: Literal["auto", "on", "off"] = "auto",
+         phases: Literal["measure", "keep"] = "measure") -> SyncOutcome:
     """Estimate every camera's clock from the ball's detections, as ``pslog sync`` does.
 
     Jittery host timestamps are first replaced by a robust line against frame index
@@ -280,12 +291,19 @@ def sync(session: Session | str | os.PathLike[str],
     search_s : scan each offset over ±search_s seconds around the rig's value (default half
         a frame period)
     regularize : ``auto``, ``on`` or ``off``
+    phases : ``measure`` (default): each camera's shutter offset (the rig's ``offset``, where
+        in its frame period the shutter fires) is measured from the frames' corrected times
+        (:func:`pslog.timing.shutter_phases`) and the returned rig holds the measured ones
+        where they differ from the rig's by more than :data:`pslog.timing.PHASE_AGREE` of a
+        frame period and every camera's phase is steady (free-running cameras, whose rig
+        says 0: type A's and the filter's tests of a missed frame count in their spacing;
+        docs/timing.md, "Shutter phases"); ``keep``: the rig's offsets kept
 
     Raises
     ------
     pslog.errors.FusionError : no detection, or the estimate failed (with the likely cause)
-    pslog.errors.InputError : ``estimate``, ``search_s`` or ``regularize`` not a value named
-        above (``search_s``: seconds in [1e-9, 60])
+    pslog.errors.InputError : ``estimate``, ``search_s``, ``regularize`` or ``phases`` not a
+        value named above (``search_s``: seconds in [1e-9, 60])
     """
     from . import progress
     from .estimation.sync import (
@@ -303,6 +321,7 @@ def sync(session: Session | str | os.PathLike[str],
         recorded_clocks,
         regularize_detections,
         regularize_times,
+        shutter_phases,
     )
 
     try:
@@ -321,6 +340,8 @@ def sync(session: Session | str | os.PathLike[str],
     search_s = check_search_s(search_s)  # (before the session is read)
     if regularize not in ("auto", "on", "off"):
         raise InputError(f"regularize {regularize!r}: auto, on or off")
+    if phases not in ("measure", "keep"):
+        raise InputError(f"phases {phases!r}: measure or keep")
     read = _session(session)
     # a synced copy synced again: from the clock model recorded before its first sync (its
     # estimates are this data's, not known values: docs/timing.md, "Syncing a synced copy")
@@ -493,8 +514,42 @@ def sync(session: Session | str | os.PathLike[str],
     # the model recorded for the next sync: every parameter's, those this sync kept at the
     # copy's values too (they are an earlier sync's estimates of this data: recording them
     # as the prior lost the model before the first sync; review39)
-    return SyncOutcome(result.rig, result, detections, obs, reports, tuple(notes),
-                       recorded_clocks(read.rig, read.metadata)[0], prior_estimated, period)
+    measured, written, rig_out = None, False, result.rig
+    if phases == "measure":
+        measured = shutter_phases(detections.frame_time_ns, detections.frame_camera,
+                                  result.rig)
+        note, written = _phases_note(measured, result.rig)
+        if written:
+            rig_out = measured.rig(result.rig)
+        if note:
+            notes.append(note)
+    return SyncOutcome(rig_out, result, detections, obs, reports, tuple(notes),
+                       recorded_clocks(read.rig, read.metadata)[0], prior_estimated, period,
+                       measured, written)
+
+
+def _phases_note(measured: ShutterPhases, rig: Rig) -> tuple[str, bool]:
+    """What :func:`sync` says of the shutter offsets it measured, and whether it writes them:
+    written where the rig's are not where the shutters fire (``""`` and False where they
+    are, or a camera has too few frames to tell); kept, and said, where a camera's phase is
+    not steady."""
+    from .timing import PHASE_MIN_FRAMES, PHASE_SPREAD
+
+    unsteady = [f"{cam.name}'s frames spread {spread * 1e3:.2f} ms around one phase"
+                for cam, frames, spread in zip(rig.cameras, measured.frames.tolist(),
+                                               measured.spread_s.tolist(), strict=True)
+                if frames >= PHASE_MIN_FRAMES and spread > PHASE_SPREAD * cam.frame_period]
+    if unsteady:
+        return (f"shutter offsets kept as the rig says: {'; '.join(unsteady)} (a frame rate "
+                f"off its nominal one walks the phase through the session; host stamps left "
+                f"jittery spread it)", False)
+    if not measured.writable(rig) or not measured.disagree(rig):
+        return "", False
+    pairs = ", ".join(f"{cam.name} {m * 1e3:.3f} ms (rig {cam.offset * 1e3:.3f})"
+                      for cam, m in zip(rig.cameras, measured.offset_s.tolist(), strict=True))
+    return (f"shutter offsets measured from the frames' corrected times, where the rig's are "
+            f"not: {pairs}; the copy's rig holds them (type A and the filter count a missed "
+            f"frame in their spacing; --phases keep keeps the rig's)", True)
 
 
 def _coarse_start(detections: Detections, rig: Rig) -> tuple[Rig, str, list[str]]:

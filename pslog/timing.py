@@ -197,6 +197,125 @@ def observations(detections: Detections, rig: Rig) -> Observations:
         time_ns = time_ns + repeat.astype(np.int64)
 
 
+
+#: ``pslog sync`` writes the shutter offsets it measures (:func:`shutter_phases`) where a
+#: camera's is further than this share of its frame period from the rig's (a plan met
+#: within it, e.g. a type-A stagger within the clocks' error, is kept as the rig says it)
+PHASE_AGREE = 0.05
+#: ... provided every camera's frames keep one phase: a circular standard deviation of at
+#: most this share of the frame period (a frame rate off its nominal one walks the phase
+#: through the session; host stamps left jittery spread it)
+PHASE_SPREAD = 0.02
+#: ... and every camera has at least this many frames
+PHASE_MIN_FRAMES = 30
+
+
+@dataclass(frozen=True)
+class ShutterPhases:
+    """:func:`shutter_phases`' result, per camera in rig order.
+
+    Attributes
+    ----------
+    offset_s : (n,) float64 seconds in [0, frame period): where in its frame period each
+        camera's shutter fires on the session's true clock, the first camera's placed at the
+        rig's offset (only differences between cameras are measured; NaN: no frame, or the
+        first camera has none)
+    spread_s : (n,) float64 seconds, the circular standard deviation of the frames' phases
+        around ``offset_s`` (NaN: no frame)
+    frames : (n,) int64, the frames measured
+    """
+
+    offset_s: np.ndarray
+    spread_s: np.ndarray
+    frames: np.ndarray
+
+    def writable(self, rig: Rig) -> bool:
+        """Whether the phases are measured well enough to stand for the rig's offsets: every
+        camera has :data:`PHASE_MIN_FRAMES` frames whose phases spread at most
+        :data:`PHASE_SPREAD` of its frame period."""
+        period = np.array([c.frame_period for c in rig.cameras])
+        return bool(np.all(self.frames >= PHASE_MIN_FRAMES)
+                    and np.all(self.spread_s <= PHASE_SPREAD * period))
+
+    def disagree(self, rig: Rig) -> bool:
+        """Whether some camera's measured offset is further than :data:`PHASE_AGREE` of its
+        frame period from the rig's ``offset`` (circularly: 0.1 ms and a period minus 0.1 ms
+        are 0.2 ms apart)."""
+        period = np.array([c.frame_period for c in rig.cameras])
+        planned = np.array([c.offset for c in rig.cameras])
+        miss = (self.offset_s - planned + period / 2) % period - period / 2
+        return bool(np.any(np.abs(miss) > PHASE_AGREE * period))
+
+    def rig(self, rig: Rig) -> Rig:
+        """``rig`` with each camera's ``offset`` the measured one (a NaN keeps the rig's)."""
+        cameras = []
+        for cam, offset in zip(rig.cameras, self.offset_s.tolist(), strict=True):
+            if np.isfinite(offset):
+                # (within [0, period): a float's modulo can round up to the period itself)
+                cam = cam.replace(offset=offset if offset < cam.frame_period else 0.0)
+            cameras.append(cam)
+        return Rig(tuple(cameras), rig.name)
+
+
+def shutter_phases(frame_time_ns: np.ndarray, frame_camera: np.ndarray,
+                   rig: Rig) -> ShutterPhases:
+    """Each camera's shutter offset, measured from its frames' times on the true clock.
+
+    A frame's logged time is its top row's, so its true time is :func:`true_times_ns` at row
+    0 (the readout adds nothing there). Camera ``c``'s frames fire at ``offset_c + k / fps_c``
+    (the rig's ``offset``, the simulator's shutter): each frame's phase is its true time
+    modulo the frame period ``T_c``, an angle ``θ = 2π (t mod T_c) / T_c``, and the phase is
+    their circular mean ``T_c / 2π · arg(Σ exp(iθ))`` (a phase that wraps, frames at 0.1 ms
+    and ``T_c`` − 0.1 ms, averages to 0, not to ``T_c / 2``), its spread the circular
+    standard deviation ``T_c / 2π · sqrt(−2 ln R̄)``, ``R̄ = |mean exp(iθ)|`` (Mardia & Jupp,
+    *Directional Statistics*, 2000, §2.3). Only differences between cameras are measured
+    (the session clock's zero is arbitrary): every phase is moved by one time so that the
+    first camera's is the rig's offset (as ``pslog info`` places it).
+
+    Parameters
+    ----------
+    frame_time_ns : (m,) int64, every frame's logged time (ns, session clock), as
+        :attr:`~pslog.records.Detections.frame_time_ns`
+    frame_camera : (m,) int, each frame's camera index in ``rig`` order
+    rig : Rig, whose clock model corrects the times and whose ``fps`` gives each period
+
+    Returns
+    -------
+    ShutterPhases
+    """
+    t = np.asarray(frame_time_ns, dtype=np.int64)
+    cam = np.asarray(frame_camera, dtype=np.int64)
+    n = len(rig)
+    offset, spread = np.full(n, np.nan), np.full(n, np.nan)
+    frames = np.bincount(cam, minlength=n)[:n].astype(np.int64) if len(cam) else \
+        np.zeros(n, dtype=np.int64)
+    if not len(t):
+        return ShutterPhases(offset, spread, frames)
+    p = camera_parameters(rig)
+    true = true_times_ns(t, 0.0, p["height"][cam], p["clock_offset"][cam],
+                         p["clock_drift_ppm"][cam], p["readout"][cam])
+    ref = int(true.min())  # (differences from it are small: float64 keeps them to < 1 ns)
+    rel = (true - ref).astype(np.float64) / NS
+    for c, camera in enumerate(rig.cameras):
+        rows = cam == c
+        if not rows.any():
+            continue
+        period = camera.frame_period
+        # the reference's own phase, so that cameras of other rates share one origin (an
+        # epoch-sized reference is a float64 to ~0.3 µs: below anything this decides)
+        base = float(np.fmod(ref / NS, period))
+        angle = 2 * np.pi * np.mod(base + rel[rows], period) / period
+        mean = np.mean(np.exp(1j * angle))
+        offset[c] = (np.angle(mean) / (2 * np.pi) * period) % period
+        spread[c] = np.sqrt(-2 * np.log(min(abs(mean), 1.0))) / (2 * np.pi) * period
+    if np.isfinite(offset[0]):
+        shift = rig.cameras[0].offset - offset[0]
+        periods = np.array([c.frame_period for c in rig.cameras])
+        offset = np.mod(offset + shift, periods)
+    else:
+        offset[:] = np.nan
+    return ShutterPhases(offset, spread, frames)
+
 #: Session metadata key (docs/log-format.md) where ``pslog sync`` stores each estimate with
 #: its standard deviation: JSON ``{"cameras": {name: {"clock_offset": [value, std],
 #: "clock_drift_ppm": [value, std], "readout": [value, std]}}, "estimated": [names],

@@ -123,10 +123,10 @@ def test_cli_json_table_and_the_synced_copy(tmp_path, cli, capsys):
     assert stop.value.code == 0
     help_text = " ".join(capsys.readouterr().out.split())
     assert set(report) == {"cameras", "residual_px", "estimated", "shared_readout",
-                           "selection"}
+                           "selection", "phases_written"}
     assert all(key in help_text for key in report), help_text
     keys = {"name", "offset_s", "offset_std_s", "drift_ppm", "drift_std_ppm", "readout_s",
-            "readout_std_s"}
+            "readout_std_s", "shutter_offset_s"}
     assert all(set(c) == keys for c in report["cameras"])
     c2, c3 = report["cameras"][1:]
     assert abs(c2["offset_s"] - 3e-3) < 0.4e-3 and abs(c3["offset_s"] + 4e-3) < 0.4e-3

@@ -214,7 +214,8 @@ def _phases_off_the_rig(detections, rig, output) -> str | None:
     return (f"note: the times put the shutters of {listed}, relative to "
             f"{rig.names[0]}'s, not where the rig's offsets plan them: clocks without genlock "
             f"(or the rig's offsets wrong); 'pslog sync {shell_word(output)} -o SYNCED.mcap' "
-            f"estimates each camera's clock from the ball, then fuse that")
+            f"estimates each camera's clock from the ball and writes the shutters' phases "
+            f"it measures, then fuse that")
 
 
 def _frames_without_row(detections) -> str | None:

@@ -253,7 +253,8 @@ def _note_offsets(output, rig) -> None:
         print(f"{PREFIX}note: measured shutter offsets differ from the rig's: {listed}; the "
               f"session keeps the rig's offsets (timing '{timing_label(rig)}') and the times "
               f"as logged: cameras without genlock have clocks of their own, 'pslog sync "
-              f"{out} -o synced.mcap' estimates them from the ball (then fuse that); if the "
+              f"{out} -o synced.mcap' estimates them from the ball, and writes the shutters' "
+              f"phases it measures into the copy's rig (then fuse that); if the "
               f"rig's offsets are wrong instead, 'pslog rig show {out} > fixed.toml', set the "
               f"offsets and 'pslog fuse {out} --rig fixed.toml'", file=sys.stderr)
 

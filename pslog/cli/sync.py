@@ -55,9 +55,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="replace jittery host timestamps by a robust line against frame "
                              "index first: on, off, or auto (when a camera's jitter is above "
                              "0.2 ms) (default: auto)")
+    parser.add_argument("--phases", choices=("measure", "keep"), default="measure",
+                        help="the shutter offsets (where in its frame period each camera's "
+                             "shutter fires): measure them from the frames' corrected times "
+                             "and write them into the copy's rig where the rig's are not "
+                             "within 5 %% of a frame period of them (free-running cameras "
+                             "whose rig says 0), or keep the rig's (default: measure)")
     parser.add_argument("--json", action="store_true",
                         help="print one JSON object instead of the table: cameras (rig "
-                             "order: each estimate and its standard deviation), residual_px, "
+                             "order: each estimate and its standard deviation, and "
+                             "shutter_offset_s, the offset the copy's rig holds), "
+                             "phases_written (measured offsets written), residual_px, "
                              "estimated (the parameters), shared_readout (one readout per "
                              "camera model) and selection (--estimate auto: each "
                              "test's statistic and verdict; else null); the notes (e.g. host "
@@ -80,7 +88,7 @@ def run(args: argparse.Namespace) -> int:
     session = read_session(args.session)
     outcome = sync(session, args.estimate,
                    search_s=None if args.search_ms is None else args.search_ms / 1e3,
-                   regularize=args.regularize)
+                   regularize=args.regularize, phases=args.phases)
     result = outcome.result
     # the standard deviations beside the estimates they belong to (the viewer shows them)
     stds = [(c.offset_std_s, c.drift_std_ppm, c.readout_std_s) for c in result.cameras]
@@ -88,10 +96,10 @@ def run(args: argparse.Namespace) -> int:
     auto = args.estimate == ("auto",)
     selection = [_test_json(t) for t in result.selection] if auto else None
     progress.step(f"writing {args.output}")
-    copy_session(args.session, args.output, rig=result.rig, force=args.force,
+    copy_session(args.session, args.output, rig=outcome.rig, force=args.force,
                  detections=outcome.detections if outcome.regularized else None,
                  metadata={CLOCK_STD_KEY: clock_std_json(
-                     result.rig, stds, estimated, selection, result.clock_covariance(),
+                     outcome.rig, stds, estimated, selection, result.clock_covariance(),
                      prior=outcome.prior, prior_estimated=outcome.prior_estimated)})
     notes = list(outcome.notes) + _negative_readouts(result)
     if args.json:
@@ -102,14 +110,16 @@ def run(args: argparse.Namespace) -> int:
         print(json.dumps({"cameras": [
             {"name": c.name, "offset_s": c.offset_s, "offset_std_s": c.offset_std_s,
              "drift_ppm": c.drift_ppm, "drift_std_ppm": c.drift_std_ppm,
-             "readout_s": c.readout_s, "readout_std_s": c.readout_std_s}
-            for c in result.cameras], "residual_px": result.residual_px,
+             "readout_s": c.readout_s, "readout_std_s": c.readout_std_s,
+             "shutter_offset_s": cam.offset}
+            for c, cam in zip(result.cameras, outcome.rig.cameras, strict=True)],
+            "phases_written": outcome.phases_written, "residual_px": result.residual_px,
             "estimated": list(estimated), "shared_readout": result.shared_readout,
             "selection": selection}))
         return 0
     for note in outcome.notes:
         print(note)
-    print(_table(result, outcome.observations, estimated))
+    print(_table(result, outcome, estimated))
     if auto:
         print(_choice(result))
     elif result.shared_readout:
@@ -239,7 +249,9 @@ def _legend(estimated, auto: bool = False, rig=None) -> str:
                "shutter, top row to bottom row; resid: the RMS reprojection residual of the "
                "camera's inlying detections; rig: the shutter offset the rig plans, relative "
                "to the first camera's; phase: each shutter's (top row's) phase after sync, "
-               "relative to the first camera's (near rig when the shutters keep the plan)")
+               "relative to the first camera's (near rig when the shutters keep the plan; "
+               "further than 5 % of a frame period from it, the copy's rig holds the phases "
+               "unless --phases keep)")
     rates = None if rig is None else _differing_rates(rig)
     if rig is None or rates is None:
         columns += ("; ideal: the type-A stagger i/(n·fps), shutters evenly spread over a "
@@ -266,35 +278,27 @@ def _differing_rates(rig) -> str | None:
     return None if len(rates) == 1 else f"{', '.join(f'{r:g}' for r in rates)} fps"
 
 
-def _table(result, obs, estimated=("offset", "drift", "readout")) -> str:
+def _table(result, outcome, estimated=("offset", "drift", "readout")) -> str:
     """Per camera: each estimate ± std, residual, the rig's planned shutter offset and the
     achieved shutter phase (both relative to the first camera's, within the camera's frame
-    period), and, when the cameras share one frame rate, the ideal type-A stagger
-    ``i / (n · fps)``; a parameter not ``estimated`` shows the rig's value and ``kept`` for
-    its σ, the first camera's offset and drift ``ref`` (0 by definition)."""
-    import numpy as np
-
-    from pslog.records import NS
+    period; the phase :func:`pslog.timing.shutter_phases` of every frame, as ``--phases
+    measure`` writes it), and, when the cameras share one frame rate, the ideal type-A
+    stagger ``i / (n · fps)``; a parameter not ``estimated`` shows the rig's value and
+    ``kept`` for its σ, the first camera's offset and drift ``ref`` (0 by definition)."""
     from pslog.tables import format_table
-    from pslog.timing import camera_parameters, true_times_ns
+    from pslog.timing import shutter_phases
 
     rig = result.rig
-    p = camera_parameters(rig)
     n = len(rig)
     ideal = _differing_rates(rig) is None
+    measured = outcome.phases if outcome.phases is not None else shutter_phases(
+        outcome.detections.frame_time_ns, outcome.detections.frame_camera, rig)
     cells = []
-    phase0 = None
     for i, (cam, est) in enumerate(zip(rig.cameras, result.cameras, strict=True)):
-        rows = obs.camera == i
         period = cam.frame_period
-        top = true_times_ns(obs.time_ns[rows], 0.0, p["height"][i], p["clock_offset"][i],
-                            p["clock_drift_ppm"][i], 0.0) / NS  # each frame's top row
-        angle = 2 * np.pi * np.mod(top, period) / period
-        phase = (np.angle(np.mean(np.exp(1j * angle))) / (2 * np.pi) * period) % period \
-            if len(top) else float("nan")
-        phase0 = phase if phase0 is None else phase0
-        rel = (phase - phase0) % period
-        # the plan, as phase is measured: against the first camera, within this period
+        # both against the first camera, within this camera's period (measured places the
+        # first camera at the rig's offset)
+        rel = (float(measured.offset_s[i]) - rig.cameras[0].offset) % period
         planned = (cam.offset - rig.cameras[0].offset) % period
         def sigma(name: str, text: str, reference: bool) -> str:
             return "ref" if reference else (f"± {text}" if name in estimated else "kept")
