@@ -181,7 +181,9 @@ def test_info_of_a_synced_session_does_not_call_its_clocks_off(tmp_path):
     clocks off, or the rig's offsets not the cameras'", though its clock model corrects the
     clocks and the phases are measured on the corrected times. It now says the cameras fire
     there, not where the offsets plan, and how to set them; the unsynced session keeps its
-    line and the `pslog sync` command."""
+    line and the `pslog sync` command. (Since session 48 `pslog sync` writes the phases it
+    measures into the copy's rig: info of that copy has nothing to say of its shutters; the
+    line is that of a copy synced with `--phases keep`.)"""
     sim, det, rig = tmp_path / "sim.mcap", tmp_path / "det.csv", tmp_path / "rig.toml"
     lab, synced = tmp_path / "lab.mcap", tmp_path / "synced.mcap"
     pslog_ok("simulate", "--rig", "paper3", "--timing", "typeA", "--motion", "rally",
@@ -193,15 +195,21 @@ def test_info_of_a_synced_session_does_not_call_its_clocks_off(tmp_path):
     before = pslog_ok("info", lab)
     assert "camera clocks off, or the rig's offsets not the cameras'; 'pslog sync" in before
     pslog_ok("sync", lab, "-o", synced)
-    after = pslog_ok("info", synced)
+    written = pslog_ok("info", synced)
+    assert "camera clocks off" not in written and "offsets plan" not in written, written
+    kept = tmp_path / "kept.mcap"
+    pslog_ok("sync", lab, "-o", kept, "--phases", "keep")
+    after = pslog_ok("info", kept)
     assert "camera clocks off" not in after, after
     assert ("measured on the times the rig's clock model corrects: the cameras fire there, "
             "not where the rig's offsets plan") in after, after
-    assert f"'pslog rig show {synced} > rig.toml', edit the offsets" in after, after
+    assert f"'pslog rig show {kept} > rig.toml', edit the offsets" in after, after
     # the synced rig carried into a new session (its clocks another session's): said so,
     # with the sync command
     carried, again = tmp_path / "synced.toml", tmp_path / "again.mcap"
-    carried.write_text(pslog_ok("rig", "show", synced))
+    # (the copy kept at offsets 0: the new session's phases off them, as a restarted
+    # webcam's are off any earlier session's)
+    carried.write_text(pslog_ok("rig", "show", kept))
     pslog_ok("import", "--rig", carried, "--detections", det, "-o", again)
     said = pslog_ok("info", again)
     assert ("a model not estimated on this session (given with its rig, e.g. an earlier "

@@ -155,10 +155,11 @@ def _text(info: dict) -> list[str]:
             # measured are on the corrected times, where the cameras really fire)
             lines.append(f"  shutters off the rig's offsets ({said}), measured on the times "
                          f"the rig's clock model corrects: the cameras fire there, not where "
-                         f"the rig's offsets plan (fusion runs on the corrected times; the "
-                         f"offsets name the timing, hence the default methods; to set them: "
-                         f"'pslog rig show {path} > rig.toml', edit the offsets, 'pslog fuse "
-                         f"{path} --rig rig.toml')")
+                         f"the rig's offsets plan (fusion runs on the corrected times; type "
+                         f"A's and the filter's tests of a missed frame count in the offsets' "
+                         f"spacing; 'pslog sync' without --phases keep writes the measured "
+                         f"ones; or 'pslog rig show {path} > rig.toml', edit the offsets, "
+                         f"'pslog fuse {path} --rig rig.toml')")
         else:
             lines.append(f"  shutters off the rig's offsets ({said}): camera clocks off, or the "
                          f"rig's offsets not the cameras'; 'pslog sync {path} -o synced.mcap' "
