@@ -270,7 +270,9 @@ def shutter_phases(frame_time_ns: np.ndarray, frame_camera: np.ndarray,
     standard deviation ``T_c / 2π · sqrt(−2 ln R̄)``, ``R̄ = |mean exp(iθ)|`` (Mardia & Jupp,
     *Directional Statistics*, 2000, §2.3). Only differences between cameras are measured
     (the session clock's zero is arbitrary): every phase is moved by one time so that the
-    first camera's is the rig's offset (as ``pslog info`` places it).
+    first camera's is the rig's offset (as ``pslog info`` places it); with cameras of other
+    rates, that time is known only up to whole periods of the first camera, each giving the
+    same schedule, and the one that puts the phases nearest the rig's offsets is taken.
 
     Parameters
     ----------
@@ -311,10 +313,42 @@ def shutter_phases(frame_time_ns: np.ndarray, frame_camera: np.ndarray,
     if np.isfinite(offset[0]):
         shift = rig.cameras[0].offset - offset[0]
         periods = np.array([c.frame_period for c in rig.cameras])
-        offset = np.mod(offset + shift, periods)
+        planned = np.array([c.offset for c in rig.cameras])
+        # cameras of other rates: the first camera's frames fix the clock's zero only up to
+        # whole periods of its own, and a shift by one moves another rate's phase (a 60 fps
+        # camera's period is half a 30 fps one's): every such shift gives the same schedule
+        # (the same gaps between shutter instants), and the one nearest the rig's offsets is
+        # taken (a type-A plan of 60, 30 and 30 fps read 0, 27.8 and 5.6 ms against the
+        # plan's 0, 11.1 and 22.2 when the session's zero fell on the odd 60 fps frame)
+        k = np.arange(_rate_shifts(rig), dtype=np.float64)[:, None]
+        trial = np.mod(offset + shift + k * periods[0], periods)  # (K, n)
+        miss = np.abs((trial - planned + periods / 2) % periods - periods / 2) / periods
+        worst = np.max(np.where(np.isfinite(miss), miss, 0.0), axis=1)
+        offset = trial[int(np.argmin(worst))]
     else:
         offset[:] = np.nan
     return ShutterPhases(offset, spread, frames)
+
+
+#: most shifts of the first camera's period :func:`shutter_phases` tries (rates whose ratio
+#: is no fraction of denominator up to 1000 beat, and their shifts move the phases by less)
+_MOST_SHIFTS = 1000
+
+
+def _rate_shifts(rig: Rig) -> int:
+    """How many shifts by whole periods of the first camera give other phases to the rig's
+    other cameras: the least common multiple of the denominators of ``fps_c / fps_0`` (1 for
+    one frame rate, 2 for 30 fps beside a 60 fps first camera, 5 for 30 beside 25), at most
+    :data:`_MOST_SHIFTS`."""
+    from fractions import Fraction
+    from math import lcm
+
+    first = rig.cameras[0].fps
+    count = 1
+    for cam in rig.cameras[1:]:
+        ratio = Fraction(cam.fps / first).limit_denominator(_MOST_SHIFTS)
+        count = min(lcm(count, ratio.denominator), _MOST_SHIFTS)
+    return count
 
 #: Session metadata key (docs/log-format.md) where ``pslog sync`` stores each estimate with
 #: its standard deviation: JSON ``{"cameras": {name: {"clock_offset": [value, std],

@@ -198,3 +198,30 @@ def test_a_bad_phases_value_is_one_line(sessions, tmp_path):
 
     with pytest.raises(InputError, match="phases 'guess': measure or keep"):
         api.sync(zero, phases="guess")
+
+
+@pytest.mark.parametrize("fps, shift", [((60.0, 30.0, 30.0), 1 / 60), ((25.0, 30.0, 30.0), 3 / 25)])
+def test_a_plan_of_two_rates_met_from_another_zero_is_kept(fps, shift):
+    """A type-A plan of cameras of two rates, its shutters keeping it exactly, but the
+    session clock's zero a whole number of the first camera's periods from the plan's (the
+    recording began on another frame of it): the same schedule, every gap between shutter
+    instants the plan's. The phases measured are the plan's offsets, and sync keeps the rig
+    and its ``typeA`` label (review48: 60/30/30 fps read 0, 27.8 and 5.6 ms against the
+    plan's 0, 11.1 and 22.2, and the rig was rewritten as ``custom``)."""
+    from pslog.fusion.confirm import usual_interval_s
+    from pslog.rig import apply_timing, timing_label
+
+    base = builtin_rig("paper3")
+    plan = apply_timing(Rig(tuple(c.replace(fps=f) for c, f in zip(base.cameras, fps,
+                                                                      strict=True)), "two"),
+                        "typeA")
+    shutters = Rig(tuple(c.replace(offset=(c.offset + shift) % c.frame_period)
+                         for c in plan.cameras), "two")
+    assert usual_interval_s(shutters) == pytest.approx(usual_interval_s(plan), abs=1e-12)
+    times = [np.round((c.offset + np.arange(90) / c.fps) * NS).astype(np.int64)
+             for c in shutters.cameras]
+    got = shutter_phases(np.concatenate(times), np.repeat([0, 1, 2], 90), plan)
+    assert got.offset_s == pytest.approx([c.offset for c in plan.cameras], abs=2e-9)
+    assert not got.disagree(plan) and got.writable(plan)
+    assert _phases_note(got, plan) == ("", False)
+    assert timing_label(got.rig(plan)) == "typeA"
