@@ -320,7 +320,7 @@ def shutter_phases(frame_time_ns: np.ndarray, frame_camera: np.ndarray,
         # (the same gaps between shutter instants), and the one nearest the rig's offsets is
         # taken (a type-A plan of 60, 30 and 30 fps read 0, 27.8 and 5.6 ms against the
         # plan's 0, 11.1 and 22.2 when the session's zero fell on the odd 60 fps frame)
-        k = np.arange(_rate_shifts(rig), dtype=np.float64)[:, None]
+        k = np.arange(rate_shifts([c.fps for c in rig.cameras]), dtype=np.float64)[:, None]
         trial = np.mod(offset + shift + k * periods[0], periods)  # (K, n)
         miss = np.abs((trial - planned + periods / 2) % periods - periods / 2) / periods
         worst = np.max(np.where(np.isfinite(miss), miss, 0.0), axis=1)
@@ -335,18 +335,18 @@ def shutter_phases(frame_time_ns: np.ndarray, frame_camera: np.ndarray,
 _MOST_SHIFTS = 1000
 
 
-def _rate_shifts(rig: Rig) -> int:
-    """How many shifts by whole periods of the first camera give other phases to the rig's
-    other cameras: the least common multiple of the denominators of ``fps_c / fps_0`` (1 for
-    one frame rate, 2 for 30 fps beside a 60 fps first camera, 5 for 30 beside 25), at most
-    :data:`_MOST_SHIFTS`."""
+def rate_shifts(fps) -> int:
+    """How many shifts by whole periods of the first camera give other phases to the other
+    cameras (``fps``: (n,) each camera's frame rate, the first camera's first): the least
+    common multiple of the denominators of ``fps_c / fps_0`` (1 for one frame rate, 2 for 30
+    fps beside a 60 fps first camera, 5 for 30 beside 25), at most :data:`_MOST_SHIFTS`."""
     from fractions import Fraction
     from math import lcm
 
-    first = rig.cameras[0].fps
+    first = float(fps[0])
     count = 1
-    for cam in rig.cameras[1:]:
-        ratio = Fraction(cam.fps / first).limit_denominator(_MOST_SHIFTS)
+    for rate in fps[1:]:
+        ratio = Fraction(float(rate) / first).limit_denominator(_MOST_SHIFTS)
         count = min(lcm(count, ratio.denominator), _MOST_SHIFTS)
     return count
 

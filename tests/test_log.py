@@ -512,6 +512,35 @@ def test_measured_offsets_of_a_rig_whose_first_camera_is_not_at_zero(tmp_path):
     assert info["offset_reference"] == rig.names[0]
 
 
+@pytest.mark.parametrize("dropped", [0, 1, 2])
+def test_measured_offsets_of_cameras_of_two_rates(dropped):
+    """A 60 fps camera and two 30 fps ones at their rig's offsets, the 60 fps camera's first
+    ``dropped`` frames lost: its first frame then fixes the clock's zero only up to its own
+    period, half the others'. Every camera reads its rig offset (review48: with one frame
+    dropped the 30 fps cameras read 16.7 ms off, and ``pslog info`` said so of the true rig
+    and of ``pslog sync``'s copy)."""
+    import dataclasses
+
+    from pslog.log.info import offset_disagreements, timing_table
+    from pslog.rig import Rig, builtin_rig
+
+    base = builtin_rig("paper3")
+    rig = Rig(tuple(c.replace(fps=f, offset=o) for c, f, o in
+                    zip(base.cameras, (60.0, 30.0, 30.0), (0.005, 0.020, 0.007), strict=True)),
+              "two rates")
+    det = _jittered(rig, jitter_s=1e-4)
+    keep = ~((det.frame_camera == 0) & (det.frame_index < dropped))
+    det = dataclasses.replace(det, frame_time_ns=det.frame_time_ns[keep],
+                              frame_camera=det.frame_camera[keep],
+                              frame_index=det.frame_index[keep],
+                              cand_frame=np.zeros(0, np.int64), cand_uv=np.zeros((0, 2)),
+                              cand_radius=np.zeros(0), cand_score=np.zeros(0))
+    rows = timing_table(det, [c.offset for c in rig.cameras], rig)
+    for cam, row in zip(rig.cameras, rows, strict=True):
+        assert abs(row["offset_measured_s"] - cam.offset) < 2e-4, (dropped, cam.name, row)
+    assert offset_disagreements(det, rig) == []
+
+
 def test_measured_offsets_use_the_rigs_clock_model(tmp_path):
     """A session whose rig holds its cameras' clock parameters (as after ``pslog sync``):
     the offsets are measured on corrected times, so they agree with the rig's, though the

@@ -88,7 +88,10 @@ def timing_table(detections: Detections, nominal_offsets_s=None, rig=None) -> li
     Only offsets between cameras can be measured: camera 0 is placed at its nominal offset
     and camera i at the offset nearest its nominal one that matches the measured phase
     difference (signed: a camera 0.1 ms early on a nominal offset of 0 reads -0.1 ms, not a
-    period minus 0.1 ms).
+    period minus 0.1 ms); with cameras of other rates (``rig`` given), that difference is
+    known only up to whole periods of camera 0, one shift for every camera, and the one that
+    puts the cameras nearest their nominal offsets is taken (as
+    :func:`pslog.timing.shutter_phases`).
 
     Parameters
     ----------
@@ -126,13 +129,27 @@ def timing_table(detections: Detections, nominal_offsets_s=None, rig=None) -> li
             "candidates_per_frame": float(np.mean(counts)) if n else float("nan"),
         })
         phases.append((period, phase))
-    period0, phase0 = phases[0] if phases else (float("nan"), float("nan"))
-    for i, (row, (period, phase)) in enumerate(zip(rows, phases, strict=True)):
-        used = period if np.isfinite(period) else period0
-        expected = nominal[i] - nominal[0]
-        if np.isfinite(used) and np.isfinite(phase0) and np.isfinite(phase):
-            miss = (phase - phase0) - expected
-            row["offset_measured_s"] = float(nominal[i] + miss - used * np.round(miss / used))
+    if not phases:
+        return rows
+    from ..timing import rate_shifts
+
+    period0, phase0 = phases[0]
+    used = np.array([period if np.isfinite(period) else period0 for period, _ in phases])
+    miss = np.array([phase for _, phase in phases]) - phase0 - (nominal - nominal[0])
+    # cameras of other rates: camera 0's first frame fixes the clock's zero only up to whole
+    # periods of camera 0, each giving the same schedule: the shift, the same for every
+    # camera, that puts them nearest their nominal offsets (as pslog sync measures them:
+    # pslog.timing.shutter_phases; review48: a 60/30 fps rig whose 60 fps camera's first
+    # frame was dropped read its 30 fps cameras 16.7 ms off their true offsets)
+    shifts = rate_shifts([c.fps for c in rig.cameras]) if rig is not None else 1
+    trial = miss[None, :] - np.arange(shifts)[:, None] * period0  # (shifts, n)
+    with np.errstate(invalid="ignore"):
+        wrapped = np.abs(trial - used * np.round(trial / used)) / used
+    miss = trial[int(np.argmin(np.max(np.where(np.isfinite(wrapped), wrapped, 0.0), axis=1)))]
+    for i, row in enumerate(rows):
+        if np.isfinite(used[i]) and np.isfinite(phase0) and np.isfinite(miss[i]):
+            row["offset_measured_s"] = float(nominal[i] + miss[i]
+                                             - used[i] * np.round(miss[i] / used[i]))
         else:
             row["offset_measured_s"] = float("nan")
     return rows
