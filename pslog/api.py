@@ -541,8 +541,8 @@ def _phases_note(measured: ShutterPhases, rig: Rig) -> tuple[str, bool]:
                 if frames >= PHASE_MIN_FRAMES and spread > PHASE_SPREAD * cam.frame_period]
     if unsteady:
         return (f"shutter offsets kept as the rig says: {'; '.join(unsteady)} (a frame rate "
-                f"off its nominal one walks the phase through the session; host stamps left "
-                f"jittery spread it)", False)
+                f"off the first camera's, each against its nominal one, walks the phase "
+                f"through the session; host stamps left jittery spread it)", False)
     if not measured.writable(rig) or not measured.disagree(rig):
         return "", False
     pairs = ", ".join(f"{cam.name} {m * 1e3:.3f} ms (rig {cam.offset * 1e3:.3f})"

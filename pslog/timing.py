@@ -262,7 +262,10 @@ def shutter_phases(frame_time_ns: np.ndarray, frame_camera: np.ndarray,
     """Each camera's shutter offset, measured from its frames' times on the true clock.
 
     A frame's logged time is its top row's, so its true time is :func:`true_times_ns` at row
-    0 (the readout adds nothing there). Camera ``c``'s frames fire at ``offset_c + k / fps_c``
+    0 (the readout adds nothing there), then scaled about the earliest so that the first
+    camera's frames keep its nominal rate (:data:`RATE_SCALE_MAX`: a rate common to every
+    camera off the nominal one leaves the phases' differences, and walks each phase).
+    Camera ``c``'s frames fire at ``offset_c + k / fps_c``
     (the rig's ``offset``, the simulator's shutter): each frame's phase is its true time
     modulo the frame period ``T_c``, an angle ``θ = 2π (t mod T_c) / T_c``, and the phase is
     their circular mean ``T_c / 2π · arg(Σ exp(iθ))`` (a phase that wraps, frames at 0.1 ms
@@ -297,7 +300,13 @@ def shutter_phases(frame_time_ns: np.ndarray, frame_camera: np.ndarray,
     true = true_times_ns(t, 0.0, p["height"][cam], p["clock_offset"][cam],
                          p["clock_drift_ppm"][cam], p["readout"][cam])
     ref = int(true.min())  # (differences from it are small: float64 keeps them to < 1 ns)
-    rel = (true - ref).astype(np.float64) / NS
+    # on the first camera's frame clock: its frames at its nominal rate, every camera's
+    # time scaled alike (cameras of one model on one host clock run a common few hundred
+    # ppm off their nominal rate; their phases keep their differences, which are what the
+    # schedule's gaps are made of, while each walks against the nominal period: three
+    # cameras at 29.99 fps in 30 s spread 2.93 ms each, and no phase was written)
+    rel = (true - ref).astype(np.float64) / NS * _rate_scale(
+        np.sort(true[cam == 0]), rig.cameras[0].frame_period)
     for c, camera in enumerate(rig.cameras):
         rows = cam == c
         if not rows.any():
@@ -328,6 +337,25 @@ def shutter_phases(frame_time_ns: np.ndarray, frame_camera: np.ndarray,
     else:
         offset[:] = np.nan
     return ShutterPhases(offset, spread, frames)
+
+
+#: :func:`shutter_phases` puts the times on the first camera's frame clock where its
+#: measured frame period is within this share of its nominal one (further: another rate
+#: than the rig's, e.g. frames dropped in a pattern; the times are kept)
+RATE_SCALE_MAX = 0.01
+
+
+def _rate_scale(times_ns: np.ndarray, period: float) -> float:
+    """``period`` over the frame period the first camera's sorted times ``times_ns`` (k,)
+    int64 keep (:func:`pslog.log.info.measure_timing`: robust to dropped frames and
+    jitter), 1.0 where they are too few (:data:`PHASE_MIN_FRAMES`) or the ratio is further
+    than :data:`RATE_SCALE_MAX` from 1."""
+    from .log.info import measure_timing
+
+    if len(times_ns) < PHASE_MIN_FRAMES:
+        return 1.0
+    ratio = period / measure_timing(times_ns)[0]
+    return float(ratio) if abs(ratio - 1.0) <= RATE_SCALE_MAX else 1.0
 
 
 #: most shifts of the first camera's period :func:`shutter_phases` tries (rates whose ratio

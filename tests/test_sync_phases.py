@@ -225,3 +225,30 @@ def test_a_plan_of_two_rates_met_from_another_zero_is_kept(fps, shift):
     assert not got.disagree(plan) and got.writable(plan)
     assert _phases_note(got, plan) == ("", False)
     assert timing_label(got.rig(plan)) == "typeA"
+
+
+def test_cameras_off_their_nominal_rate_alike_keep_their_phases():
+    """Three cameras of one model on one host clock, every one at 29.99 fps where the rig
+    says 30 (333 ppm), a type-A stagger, 30 s: each camera's phase walks 10 ms against the
+    nominal period, but their differences, all the schedule's gaps are made of, stay. The
+    phases are measured on the first camera's frame clock: steady, the stagger, written
+    (review48: each spread 2.93 ms and sync kept the rig's zeros, saying the frame rates
+    were off). A camera off the first one's rate still spreads and keeps them."""
+    fps = 29.99
+    k = np.arange(900)
+    stagger = [0.0, 1 / (3 * fps), 2 / (3 * fps)]
+    times = np.concatenate([np.round((o + k / fps) * NS) for o in stagger]).astype(np.int64)
+    cams = np.repeat([0, 1, 2], 900)
+    rig = builtin_rig("paper3")  # (30 fps, offsets 0)
+    rig = Rig(tuple(c.replace(offset=0.0) for c in rig.cameras), "zeros")
+    got = shutter_phases(times, cams, rig)
+    assert got.offset_s == pytest.approx([o * fps / 30 for o in stagger], abs=1e-8)
+    assert np.all(got.spread_s < 1e-6) and got.writable(rig) and got.disagree(rig)
+    assert _phases_note(got, rig)[1]
+    walk = times.copy()
+    walk[cams == 2] = np.round((stagger[2] + k / (fps * (1 + 3e-4))) * NS)
+    got = shutter_phases(walk, cams, rig)
+    assert got.spread_s[2] > PHASE_SPREAD / 30 and not got.writable(rig)
+    note, written = _phases_note(got, rig)
+    assert not written and note.startswith("shutter offsets kept as the rig says: cam3's frames "
+                                           "spread "), note
