@@ -320,8 +320,11 @@ def shutter_phases(frame_time_ns: np.ndarray, frame_camera: np.ndarray,
         offset[c] = (np.angle(mean) / (2 * np.pi) * period) % period
         spread[c] = np.sqrt(-2 * np.log(min(abs(mean), 1.0))) / (2 * np.pi) * period
     if np.isfinite(offset[0]):
-        shift = rig.cameras[0].offset - offset[0]
         periods = np.array([c.frame_period for c in rig.cameras])
+        # (the nearest such time: a first camera measured a hair below its period's end,
+        # 33.33 ms for 0, moved by a whole period of its own, 33.37 µs at 29.97 fps)
+        shift = (rig.cameras[0].offset - offset[0] + periods[0] / 2) % periods[0] \
+            - periods[0] / 2
         planned = np.array([c.offset for c in rig.cameras])
         # cameras of other rates: the first camera's frames fix the clock's zero only up to
         # whole periods of its own, and a shift by one moves another rate's phase (a 60 fps
@@ -334,6 +337,8 @@ def shutter_phases(frame_time_ns: np.ndarray, frame_camera: np.ndarray,
         miss = np.abs((trial - planned + periods / 2) % periods - periods / 2) / periods
         worst = np.max(np.where(np.isfinite(miss), miss, 0.0), axis=1)
         offset = trial[int(np.argmin(worst))]
+        offset[0] = rig.cameras[0].offset  # (by definition, not a float's sum)
+        offset[offset >= periods] = 0.0  # (a modulo of a hair below 0 rounds to the period)
     else:
         offset[:] = np.nan
     return ShutterPhases(offset, spread, frames)
@@ -358,25 +363,31 @@ def _rate_scale(times_ns: np.ndarray, period: float) -> float:
     return float(ratio) if abs(ratio - 1.0) <= RATE_SCALE_MAX else 1.0
 
 
-#: most shifts of the first camera's period :func:`shutter_phases` tries (rates whose ratio
-#: is no fraction of denominator up to 1000 beat, and their shifts move the phases by less)
-_MOST_SHIFTS = 1000
+#: the largest denominator of a ratio of two frame rates that :func:`rate_shifts` takes for
+#: one (60/30, 30/25 = 6/5, 29.97/23.976 = 5/4, 25/120 = 5/24); rates of no such ratio, to
+#: 1e-9, beat (29.97 beside 30, 999/1000: their instants pass through one another over 33
+#: s) and are measured from the session clock's zero, the schedule of the session's start
+_MOST_SHIFTS = 100
 
 
 def rate_shifts(fps) -> int:
     """How many shifts by whole periods of the first camera give other phases to the other
     cameras (``fps``: (n,) each camera's frame rate, the first camera's first): the least
     common multiple of the denominators of ``fps_c / fps_0`` (1 for one frame rate, 2 for 30
-    fps beside a 60 fps first camera, 5 for 30 beside 25), at most :data:`_MOST_SHIFTS`."""
+    fps beside a 60 fps first camera, 5 for 30 beside 25), over the rates in a ratio of
+    denominator up to :data:`_MOST_SHIFTS` (others beat: 1)."""
     from fractions import Fraction
     from math import lcm
 
     first = float(fps[0])
     count = 1
     for rate in fps[1:]:
-        ratio = Fraction(float(rate) / first).limit_denominator(_MOST_SHIFTS)
-        count = min(lcm(count, ratio.denominator), _MOST_SHIFTS)
+        exact = float(rate) / first
+        ratio = Fraction(exact).limit_denominator(_MOST_SHIFTS)
+        if abs(float(ratio) - exact) <= 1e-9 * exact:
+            count = min(lcm(count, ratio.denominator), 100 * _MOST_SHIFTS)
     return count
+
 
 #: Session metadata key (docs/log-format.md) where ``pslog sync`` stores each estimate with
 #: its standard deviation: JSON ``{"cameras": {name: {"clock_offset": [value, std],

@@ -252,3 +252,22 @@ def test_cameras_off_their_nominal_rate_alike_keep_their_phases():
     note, written = _phases_note(got, rig)
     assert not written and note.startswith("shutter offsets kept as the rig says: cam3's frames "
                                            "spread "), note
+
+
+def test_rates_that_beat_are_measured_from_the_session_start():
+    """29.97 fps beside 30 (no ratio of small numbers: their instants pass through one
+    another over 33 s): no whole number of the first camera's periods gives the same
+    schedule, and the phases are those of the session's start, not moved to the rig's
+    (review48: a shift by up to 999 periods of the first camera put every 29.97 fps camera
+    at its rig offset, whatever it fired at; on a 30 s rally of a 30/29.97/30 type-A rig,
+    two seeds, type A's points beyond 5 cm were 10 with the start's phases, 27 at 0)."""
+    from pslog.timing import rate_shifts
+
+    assert rate_shifts([30.0, 29.97, 30.0]) == 1
+    assert rate_shifts([60.0, 30.0]) == 2 and rate_shifts([120.0, 30.0, 25.0]) == 24
+    k = np.arange(300)
+    times = np.concatenate([np.round(k / 30 * NS), np.round((0.015 + k / 29.97) * NS)])
+    rig = _pair(fps=(30.0, 29.97))
+    got = shutter_phases(times.astype(np.int64), np.repeat([0, 1], 300), rig)
+    assert got.offset_s == pytest.approx([0.0, 0.015], abs=1e-8)
+    assert got.disagree(rig)
