@@ -531,10 +531,15 @@ def sync(session: Session | str | os.PathLike[str],
 def _phases_note(measured: ShutterPhases, rig: Rig) -> tuple[str, bool]:
     """What :func:`sync` says of the shutter offsets it measured, and whether it writes them:
     written where the rig's are not where the shutters fire (``""`` and False where they
-    are, or a camera has too few frames to tell); kept, and said, where a camera's phase is
-    not steady."""
+    are, or a camera has too few frames to tell); kept, and said, where they are not and a
+    camera's phase is not steady."""
     from .timing import PHASE_MIN_FRAMES, PHASE_SPREAD
 
+    if not measured.disagree(rig):
+        # (the rig's offsets where the shutters fire: nothing to keep or write, whatever the
+        # spread; review48: a type-A session met to 0.3 ms, synced --regularize off with 1
+        # ms of host jitter, was told its offsets were kept as the rig says)
+        return "", False
     unsteady = [f"{cam.name}'s frames spread {spread * 1e3:.2f} ms around one phase"
                 for cam, frames, spread in zip(rig.cameras, measured.frames.tolist(),
                                                measured.spread_s.tolist(), strict=True)
@@ -543,7 +548,7 @@ def _phases_note(measured: ShutterPhases, rig: Rig) -> tuple[str, bool]:
         return (f"shutter offsets kept as the rig says: {'; '.join(unsteady)} (a frame rate "
                 f"off the first camera's, each against its nominal one, walks the phase "
                 f"through the session; host stamps left jittery spread it)", False)
-    if not measured.writable(rig) or not measured.disagree(rig):
+    if not measured.writable(rig):
         return "", False
     pairs = ", ".join(f"{cam.name} {m * 1e3:.3f} ms (rig {cam.offset * 1e3:.3f})"
                       for cam, m in zip(rig.cameras, measured.offset_s.tolist(), strict=True))
