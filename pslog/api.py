@@ -247,7 +247,8 @@ class SyncOutcome:
         its frames' corrected times (None: ``phases="keep"``)
     phases_written : whether ``rig`` holds them (``phases="measure"``, every camera's phase
         steady and some camera's further than :data:`pslog.timing.PHASE_AGREE` of its
-        frame period from the session rig's ``offset``; ``notes`` says so)
+        frame period (or :data:`pslog.timing.PHASE_AGREE_MAX_S`) from the session rig's
+        ``offset``; ``notes`` says so)
     """
 
     rig: Rig
@@ -295,9 +296,10 @@ def sync(session: Session | str | os.PathLike[str],
         in its frame period the shutter fires) is measured from the frames' corrected times
         (:func:`pslog.timing.shutter_phases`) and the returned rig holds the measured ones
         where they differ from the rig's by more than :data:`pslog.timing.PHASE_AGREE` of a
-        frame period and every camera's phase is steady (free-running cameras, whose rig
-        says 0: type A's and the filter's tests of a missed frame count in their spacing;
-        docs/timing.md, "Shutter phases"); ``keep``: the rig's offsets kept
+        frame period (or :data:`pslog.timing.PHASE_AGREE_MAX_S`) and every camera's phase is
+        steady (free-running cameras, whose rig says 0: type A's and the filter's tests of a
+        missed frame count in their spacing; docs/timing.md, "Shutter phases"); ``keep``:
+        the rig's offsets kept
 
     Raises
     ------

@@ -202,6 +202,11 @@ def observations(detections: Detections, rig: Rig) -> Observations:
 #: camera's is further than this share of its frame period from the rig's (a plan met
 #: within it, e.g. a type-A stagger within the clocks' error, is kept as the rig says it)
 PHASE_AGREE = 0.05
+#: ... or further than this, seconds, whichever is less (2 ms: ``pslog info``'s, ``record``'s
+#: and ``import``'s note of shutters off the rig's offsets, ``pslog.log.info.OFFSET_NOTE_S``,
+#: which names ``pslog sync``: below 40 fps 5 % of a period is more, and a sync that kept
+#: offsets those notes call off left them saying so again; review48)
+PHASE_AGREE_MAX_S = 2e-3
 #: ... provided every camera's frames keep one phase: a circular standard deviation of at
 #: most this share of the frame period (a frame rate off its nominal one walks the phase
 #: through the session; host stamps left jittery spread it)
@@ -239,12 +244,13 @@ class ShutterPhases:
 
     def disagree(self, rig: Rig) -> bool:
         """Whether some camera's measured offset is further than :data:`PHASE_AGREE` of its
-        frame period from the rig's ``offset`` (circularly: 0.1 ms and a period minus 0.1 ms
-        are 0.2 ms apart)."""
+        frame period, or :data:`PHASE_AGREE_MAX_S` if less, from the rig's ``offset``
+        (circularly: 0.1 ms and a period minus 0.1 ms are 0.2 ms apart)."""
         period = np.array([c.frame_period for c in rig.cameras])
         planned = np.array([c.offset for c in rig.cameras])
         miss = (self.offset_s - planned + period / 2) % period - period / 2
-        return bool(np.any(np.abs(miss) > PHASE_AGREE * period))
+        return bool(np.any(np.abs(miss) > np.minimum(PHASE_AGREE * period,
+                                                     PHASE_AGREE_MAX_S)))
 
     def rig(self, rig: Rig) -> Rig:
         """``rig`` with each camera's ``offset`` the measured one (a NaN keeps the rig's)."""

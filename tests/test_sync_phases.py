@@ -121,6 +121,28 @@ def test_what_sync_does_with_the_phases_it_measures():
     assert np.isnan(few.offset_s).all()
 
 
+def test_below_40_fps_a_phase_2_ms_off_is_written_as_info_notes_it():
+    """At 15 fps 5 % of a period is 3.3 ms; ``pslog info`` calls shutters 2 ms off the
+    rig's off and names ``pslog sync``, so sync writes beyond 2 ms there (review48: cam2
+    3 ms off was kept, and info said so again of the synced copy)."""
+    from pslog.log.info import OFFSET_NOTE_S
+    from pslog.timing import PHASE_AGREE_MAX_S
+
+    assert PHASE_AGREE_MAX_S == OFFSET_NOTE_S
+    rig = _pair(fps=(15.0, 15.0))
+    k = np.arange(100)
+
+    def phases(cam2_s):
+        t = np.concatenate([np.round(k / 15 * NS), np.round(cam2_s * NS)]).astype(np.int64)
+        return shutter_phases(t, np.repeat([0, 1], 100), rig)
+
+    assert phases(k / 15 + 3e-3).disagree(rig)
+    assert not phases(k / 15 + 1.9e-3).disagree(rig)
+    at30 = _pair()  # (at 30 fps 5 % of a period, 1.67 ms, is the lesser)
+    t = np.concatenate([np.round(k / 30 * NS), np.round((k / 30 + 1.8e-3) * NS)])
+    assert shutter_phases(t.astype(np.int64), np.repeat([0, 1], 100), at30).disagree(at30)
+
+
 @pytest.fixture(scope="module")
 def sessions(tmp_path_factory):
     """A paper3 rally whose shutters are a type-A stagger and whose clocks are off (cam2 4

@@ -59,8 +59,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="the shutter offsets (where in its frame period each camera's "
                              "shutter fires): measure them from the frames' corrected times "
                              "and write them into the copy's rig where the rig's are not "
-                             "within 5 %% of a frame period of them (free-running cameras "
-                             "whose rig says 0), or keep the rig's (default: measure)")
+                             "within 5 %% of a frame period (2 ms at most) of them "
+                             "(free-running cameras whose rig says 0), or keep the rig's "
+                             "(default: measure)")
     parser.add_argument("--json", action="store_true",
                         help="print one JSON object instead of the table: cameras (rig "
                              "order: each estimate and its standard deviation, and "
@@ -250,8 +251,8 @@ def _legend(estimated, auto: bool = False, rig=None) -> str:
                "camera's inlying detections; rig: the shutter offset the rig plans, relative "
                "to the first camera's; phase: each shutter's (top row's) phase after sync, "
                "relative to the first camera's (near rig when the shutters keep the plan; "
-               "further than 5 % of a frame period from it, the copy's rig holds the phases "
-               "unless --phases keep)")
+               "further than 5 % of a frame period (2 ms at most) from it, the copy's rig "
+               "holds the phases unless --phases keep)")
     rates = None if rig is None else _differing_rates(rig)
     if rig is None or rates is None:
         columns += ("; ideal: the type-A stagger i/(n·fps), shutters evenly spread over a "
