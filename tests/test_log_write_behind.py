@@ -91,3 +91,33 @@ def test_no_write_behind_without_an_old_file(tmp_path, rig3, monkeypatch):
             w.add_track(track, last=True)
     _write(tmp_path / "derived.mcap", rig3, tracks, force=False)
     assert calls == []
+
+
+def test_the_old_file_is_released_off_the_move(tmp_path, rig3, monkeypatch):
+    """The file replaced is held open across the move (its blocks are not given back inside
+    it), then closed on a thread of its own: no descriptor of it is left."""
+    import threading
+
+    rng = np.random.default_rng(89012)
+    old = tmp_path / "old.mcap"
+    old.write_bytes(b"an old session" * 1000)
+    inode = old.stat().st_ino
+    seen: list[tuple[int, int]] = []
+    real = W._release
+
+    def release(fd):
+        if fd is not None:
+            st = os.fstat(fd)
+            seen.append((st.st_ino, st.st_nlink))  # the old file, its last name gone
+        return real(fd)
+
+    monkeypatch.setattr(W, "_release", release)
+    _write(old, rig3, _tracks(rng)[:1], force=True)
+    assert seen == [(inode, 0)]
+    for thread in threading.enumerate():
+        if thread.name == "pslog-release":
+            thread.join(10)
+    held = [os.readlink(f"/proc/self/fd/{fd}") for fd in os.listdir("/proc/self/fd")
+            if os.path.exists(f"/proc/self/fd/{fd}")]
+    assert not [link for link in held if link.startswith(str(old))], held
+    assert old.stat().st_ino != inode and old.read_bytes().startswith(b"\x89MCAP")
