@@ -536,7 +536,8 @@ class SessionWriter:
         all), and the move finds little left. The same bytes, the same file: only when its
         pages go to disk changes. ``POSIX_FADV_DONTNEED`` on pages just written starts
         their writeback and leaves them cached (dirty or being written pages are not
-        dropped); where the OS has no ``posix_fadvise`` nothing is done."""
+        dropped; pages the OS had written out already, in a run slower than its own
+        writeback's 30 s, are); where the OS has no ``posix_fadvise`` nothing is done."""
         if self._behind is None:
             return
         try:
