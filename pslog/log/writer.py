@@ -410,6 +410,7 @@ class SessionWriter:
         self._write_block(self._pending)
         self._pending.clear()
         self._mcap.flush()
+        self._write_behind()
 
     def _write_block(self, messages: list[tuple[int, int, bytes, int] | _Block]) -> None:
         """Write ``(channel, time, data, sequence)`` messages as chunk(s): all at once with
@@ -477,6 +478,7 @@ class SessionWriter:
         self._images.clear()
         self._image_bytes = 0
         self._mcap.flush()
+        self._write_behind()
 
     def _queue_blocks(self, n: int, step: int, make, ahead: bool = False) -> int:
         """Write rows ``[0, n)`` as blocks ``make(lo, hi)`` of ``step`` rows, until ``make``
@@ -521,11 +523,11 @@ class SessionWriter:
     def _maybe_flush(self) -> None:
         if time.monotonic() - self._last_flush >= self._flush_interval:  # never when inf
             self.flush()
-        self._write_behind()
 
     def _write_behind(self) -> None:
         """Start the OS's writeback of what was written since the last call, once that is
-        at least :data:`_BEHIND_BYTES`, where the file is to replace an existing one.
+        at least :data:`_BEHIND_BYTES`, where the file is to replace an existing one (called
+        as chunks are written: :meth:`_drain`, :meth:`_write_images`).
 
         Why: moved over an existing file (:meth:`close`), a file that still has data the OS
         has not placed on disk is written out first, inside the move (ext4's default
