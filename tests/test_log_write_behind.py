@@ -9,6 +9,7 @@ import os
 import struct
 
 import numpy as np
+import pytest
 
 from pslog.log import SessionWriter
 from pslog.log import writer as W
@@ -57,6 +58,7 @@ def _spy(monkeypatch) -> list[tuple[int, int, int]]:
     return calls
 
 
+@pytest.mark.skipif(not hasattr(os, "posix_fadvise"), reason="no posix_fadvise here")
 def test_a_replacing_file_is_written_behind(tmp_path, rig3, monkeypatch):
     rng = np.random.default_rng(89010)
     tracks = _tracks(rng)
@@ -80,6 +82,7 @@ def test_a_replacing_file_is_written_behind(tmp_path, rig3, monkeypatch):
     assert _blanked(old) == _blanked(fresh)
 
 
+@pytest.mark.skipif(not hasattr(os, "posix_fadvise"), reason="no posix_fadvise here")
 def test_no_write_behind_without_an_old_file(tmp_path, rig3, monkeypatch):
     """A writer in place (keep mode, a new file) and a discard-mode one to a free name."""
     rng = np.random.default_rng(89011)
@@ -93,6 +96,7 @@ def test_no_write_behind_without_an_old_file(tmp_path, rig3, monkeypatch):
     assert calls == []
 
 
+@pytest.mark.skipif(not os.path.isdir("/proc/self/fd"), reason="no /proc/self/fd here")
 def test_the_old_file_is_released_off_the_move(tmp_path, rig3, monkeypatch):
     """The file replaced is held open across the move (its blocks are not given back inside
     it), then closed on a thread of its own: no descriptor of it is left."""
