@@ -253,11 +253,15 @@ class ShutterPhases:
                                                      PHASE_AGREE_MAX_S)))
 
     def rig(self, rig: Rig) -> Rig:
-        """``rig`` with each camera's ``offset`` the measured one (a NaN keeps the rig's)."""
+        """``rig`` with each camera's ``offset`` the measured one, to the nanosecond (the
+        session clock's unit: a rig file reads 0.007226951, not 0.007226950999999249; a NaN
+        keeps the rig's)."""
         cameras = []
         for cam, offset in zip(rig.cameras, self.offset_s.tolist(), strict=True):
             if np.isfinite(offset):
-                # (within [0, period): a float's modulo can round up to the period itself)
+                offset = round(offset, 9)
+                # (within [0, period): a float's modulo, or the rounding, can reach the
+                # period itself)
                 cam = cam.replace(offset=offset if offset < cam.frame_period else 0.0)
             cameras.append(cam)
         return Rig(tuple(cameras), rig.name)

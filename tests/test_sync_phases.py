@@ -178,6 +178,8 @@ def test_sync_writes_the_measured_offsets_and_type_a_fuses_as_with_the_true_ones
     written = read_session(folder / "zero_synced.mcap")
     stagger = [0.0, 1 / 90, 2 / 90]
     assert [c.offset for c in written.rig.cameras] == pytest.approx(stagger, abs=5e-4)
+    # (to the nanosecond, as the rig file shows them)
+    assert all(c.offset == round(c.offset, 9) for c in written.rig.cameras)
     assert usual_interval_s(written.rig) == pytest.approx(1 / 90, abs=5e-4)
     report = json.loads(pslog_ok("sync", zero, "-o", folder / "zero_json.mcap", "--json"))
     assert report["phases_written"] is True
