@@ -337,21 +337,36 @@ def shutter_phases(frame_time_ns: np.ndarray, frame_camera: np.ndarray,
             - periods[0] / 2
         planned = np.array([c.offset for c in rig.cameras])
         # cameras of other rates: the first camera's frames fix the clock's zero only up to
-        # whole periods of its own, and a shift by one moves another rate's phase (a 60 fps
-        # camera's period is half a 30 fps one's): every such shift gives the same schedule
-        # (the same gaps between shutter instants), and the one nearest the rig's offsets is
-        # taken (a type-A plan of 60, 30 and 30 fps read 0, 27.8 and 5.6 ms against the
-        # plan's 0, 11.1 and 22.2 when the session's zero fell on the odd 60 fps frame)
-        k = np.arange(rate_shifts([c.fps for c in rig.cameras]), dtype=np.float64)[:, None]
-        trial = np.mod(offset + shift + k * periods[0], periods)  # (K, n)
-        miss = np.abs((trial - planned + periods / 2) % periods - periods / 2) / periods
-        worst = np.max(np.where(np.isfinite(miss), miss, 0.0), axis=1)
-        offset = trial[int(np.argmin(worst))]
+        # whole periods of its own (a type-A plan of 60, 30 and 30 fps read 0, 27.8 and 5.6
+        # ms against the plan's 0, 11.1 and 22.2 when the session's zero fell on the odd 60
+        # fps frame): nearest_schedule
+        miss = nearest_schedule(offset + shift - planned, periods,
+                                [c.fps for c in rig.cameras])
+        offset = np.mod(planned + miss, periods)
         offset[0] = rig.cameras[0].offset  # (by definition, not a float's sum)
         offset[offset >= periods] = 0.0  # (a modulo of a hair below 0 rounds to the period)
     else:
         offset[:] = np.nan
     return ShutterPhases(offset, spread, frames)
+
+
+def nearest_schedule(miss_s: np.ndarray, periods: np.ndarray, fps) -> np.ndarray:
+    """Measured minus planned shutter offsets ``miss_s`` (n,) s, moved by the whole number
+    of the first camera's periods that puts every camera nearest its plan.
+
+    The first camera's frames fix the clock's zero only up to whole periods of its own, and
+    a shift by one moves the phase of a camera of another rate (a 60 fps camera's period is
+    half a 30 fps one's): every such shift gives the same schedule (the same gaps between
+    shutter instants). The shifts tried are the :func:`rate_shifts` of ``fps`` (one for
+    cameras of one rate); of them, the one whose largest circular miss, in each camera's
+    periods ``periods`` (n,) s, is least (NaN misses ignored). :func:`shutter_phases` and
+    :func:`pslog.log.info.timing_table` measure offsets so."""
+    k = np.arange(rate_shifts(fps), dtype=np.float64)[:, None]
+    trial = miss_s[None, :] + k * periods[0]  # (K, n)
+    with np.errstate(invalid="ignore"):
+        wrapped = np.abs((trial + periods / 2) % periods - periods / 2) / periods
+    return trial[int(np.argmin(np.max(np.where(np.isfinite(wrapped), wrapped, 0.0),
+                                      axis=1)))]
 
 
 #: :func:`shutter_phases` puts the times on the first camera's frame clock where its

@@ -131,21 +131,18 @@ def timing_table(detections: Detections, nominal_offsets_s=None, rig=None) -> li
         phases.append((period, phase))
     if not phases:
         return rows
-    from ..timing import rate_shifts
+    from ..timing import nearest_schedule
 
     period0, phase0 = phases[0]
     used = np.array([period if np.isfinite(period) else period0 for period, _ in phases])
     miss = np.array([phase for _, phase in phases]) - phase0 - (nominal - nominal[0])
     # cameras of other rates: camera 0's first frame fixes the clock's zero only up to whole
     # periods of camera 0, each giving the same schedule: the shift, the same for every
-    # camera, that puts them nearest their nominal offsets (as pslog sync measures them:
-    # pslog.timing.shutter_phases; review48: a 60/30 fps rig whose 60 fps camera's first
-    # frame was dropped read its 30 fps cameras 16.7 ms off their true offsets)
-    shifts = rate_shifts([c.fps for c in rig.cameras]) if rig is not None else 1
-    trial = miss[None, :] - np.arange(shifts)[:, None] * period0  # (shifts, n)
-    with np.errstate(invalid="ignore"):
-        wrapped = np.abs(trial - used * np.round(trial / used)) / used
-    miss = trial[int(np.argmin(np.max(np.where(np.isfinite(wrapped), wrapped, 0.0), axis=1)))]
+    # camera, that puts them nearest their nominal offsets (as pslog sync measures them;
+    # review48: a 60/30 fps rig whose 60 fps camera's first frame was dropped read its 30
+    # fps cameras 16.7 ms off their true offsets)
+    if rig is not None:
+        miss = nearest_schedule(miss, used, [c.fps for c in rig.cameras])
     for i, row in enumerate(rows):
         if np.isfinite(used[i]) and np.isfinite(phase0) and np.isfinite(miss[i]):
             row["offset_measured_s"] = float(nominal[i] + miss[i]
